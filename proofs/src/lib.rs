@@ -1,0 +1,3 @@
+//! Cross-crate safety harnesses; see SAFETY.md for the invariants they prove.
+#![no_std]
+#![forbid(unsafe_code)]

@@ -1,0 +1,260 @@
+//! One harness body, two drivers: Kani's symbolic values under `cargo kani`, and biased pseudo-random
+//! values under `cargo test`, so a machine without Kani still checks every property.
+//!
+//! A harness body takes `&mut impl Source`, draws its inputs from it, narrows them with
+//! [`assume!`](crate::assume) and marks interesting cases with [`cover!`](crate::cover). Under Kani
+//! `cover!` is `kani::cover!` (the proof reports it SATISFIED or UNSATISFIABLE); under `cargo test`
+//! [`Twin`] records which covers fired and [`Report::assert_covered`] fails the test if one never did.
+
+use crate::types::Speed;
+
+/// Where a harness draws its inputs from.
+pub trait Source {
+    /// Any `u8`.
+    fn u8(&mut self) -> u8;
+    /// Any `u16`.
+    fn u16(&mut self) -> u16;
+    /// Any `u32`.
+    fn u32(&mut self) -> u32;
+    /// Any `bool`.
+    fn bool(&mut self) -> bool;
+    /// Any `f32` bit pattern, NaN and infinities included.
+    fn f32(&mut self) -> f32;
+    /// Narrows the inputs: returns false if the case must be skipped (tests); under Kani it assumes and returns true.
+    fn assume(&mut self, cond: bool) -> bool;
+    /// Records a cover point (tests); a no-op under Kani, where `kani::cover!` reports it.
+    fn record(&mut self, cond: bool, name: &'static str);
+
+    /// Any `i32`.
+    fn i32(&mut self) -> i32 {
+        self.u32() as i32
+    }
+    /// Any Q16.16 speed bit pattern.
+    fn speed(&mut self) -> Speed {
+        Speed::from_bits(self.i32())
+    }
+    /// A value in `0..n` (n ≥ 1); used to pick among enum variants.
+    fn below(&mut self, n: u8) -> u8 {
+        self.u8().checked_rem(n).unwrap_or(0)
+    }
+}
+
+/// Skips (tests) or excludes (Kani) the cases where the condition is false.
+#[macro_export]
+macro_rules! assume {
+    ($src:expr, $cond:expr) => {
+        if !$crate::harness::Source::assume(&mut *$src, $cond) {
+            return;
+        }
+    };
+}
+
+/// A reachability check against vacuity: `kani::cover!` under Kani, a recorded hit under tests.
+#[macro_export]
+macro_rules! cover {
+    ($src:expr, $cond:expr, $msg:literal) => {{
+        let c: bool = $cond;
+        #[cfg(kani)]
+        {
+            kani::cover!(c, $msg);
+        }
+        $crate::harness::Source::record(&mut *$src, c, $msg);
+    }};
+}
+
+/// Symbolic inputs for Kani.
+#[cfg(kani)]
+pub struct KaniSource;
+
+#[cfg(kani)]
+impl Source for KaniSource {
+    fn u8(&mut self) -> u8 {
+        kani::any()
+    }
+    fn u16(&mut self) -> u16 {
+        kani::any()
+    }
+    fn u32(&mut self) -> u32 {
+        kani::any()
+    }
+    fn bool(&mut self) -> bool {
+        kani::any()
+    }
+    fn f32(&mut self) -> f32 {
+        kani::any()
+    }
+    fn assume(&mut self, cond: bool) -> bool {
+        kani::assume(cond);
+        true
+    }
+    fn record(&mut self, _cond: bool, _name: &'static str) {}
+}
+
+const MAX_COVERS: usize = 48;
+
+/// Pseudo-random inputs for the `cargo test` twin of a harness, biased toward edge values
+/// (0, 1, MAX, sign boundaries, small numbers, NaN/∞) where bugs live.
+pub struct Twin {
+    state: u64,
+    covers: [(&'static str, u32, u32); MAX_COVERS],
+    n_covers: usize,
+    accepted: bool,
+}
+
+/// What a twin run saw: how many cases ran past every `assume!`, and each cover's hit count.
+pub struct Report {
+    /// Cases generated.
+    pub cases: u32,
+    /// Cases that passed every assumption and ran to the end.
+    pub accepted: u32,
+    covers: [(&'static str, u32, u32); MAX_COVERS],
+    n_covers: usize,
+}
+
+impl Report {
+    /// Fails if any cover point was evaluated but never true, if fewer than `expected` cover points
+    /// were seen, or if no case got past the assumptions (a vacuous twin).
+    #[track_caller]
+    pub fn assert_covered(&self, expected: usize) {
+        assert!(self.accepted > 0, "no case passed the assumptions");
+        assert_eq!(
+            self.n_covers,
+            expected,
+            "cover points seen: {:?}",
+            self.names()
+        );
+        for (name, _seen, hit) in self.covers.iter().take(self.n_covers) {
+            assert!(*hit > 0, "cover never satisfied: {name}");
+        }
+    }
+
+    fn names(&self) -> [&'static str; MAX_COVERS] {
+        let mut out = [""; MAX_COVERS];
+        for (o, c) in out.iter_mut().zip(self.covers.iter().take(self.n_covers)) {
+            *o = c.0;
+        }
+        out
+    }
+}
+
+// The twin driver runs on the host only; its arithmetic is on random bits and wraps or saturates by design.
+#[allow(clippy::arithmetic_side_effects)]
+impl Twin {
+    /// A source seeded with `seed` (runs are reproducible).
+    pub const fn new(seed: u64) -> Self {
+        Self {
+            state: seed,
+            covers: [("", 0, 0); MAX_COVERS],
+            n_covers: 0,
+            accepted: true,
+        }
+    }
+
+    /// Runs `body` on `cases` generated inputs and reports what it saw.
+    pub fn run(seed: u64, cases: u32, mut body: impl FnMut(&mut Self)) -> Report {
+        let mut t = Self::new(seed);
+        let mut accepted = 0u32;
+        for _ in 0..cases {
+            t.accepted = true;
+            body(&mut t);
+            if t.accepted {
+                accepted = accepted.saturating_add(1);
+            }
+        }
+        Report {
+            cases,
+            accepted,
+            covers: t.covers,
+            n_covers: t.n_covers,
+        }
+    }
+
+    fn next(&mut self) -> u64 {
+        // splitmix64
+        self.state = self.state.wrapping_add(0x9E37_79B9_7F4A_7C15);
+        let mut z = self.state;
+        z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
+        z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
+        z ^ (z >> 31)
+    }
+
+    fn biased(&mut self, max: u64) -> u64 {
+        let r = self.next();
+        match r % 8 {
+            0 => {
+                let edges = [0, 1, 2, max, max.wrapping_sub(1), max / 2, max / 2 + 1];
+                edges
+                    .get((r >> 8) as usize % edges.len())
+                    .copied()
+                    .unwrap_or(0)
+            }
+            1 | 2 => (r >> 8) % 16,
+            _ => (r >> 8) & max,
+        }
+    }
+}
+
+#[allow(clippy::arithmetic_side_effects)]
+impl Source for Twin {
+    fn u8(&mut self) -> u8 {
+        self.biased(u8::MAX.into()) as u8
+    }
+    fn u16(&mut self) -> u16 {
+        self.biased(u16::MAX.into()) as u16
+    }
+    fn u32(&mut self) -> u32 {
+        self.biased(u32::MAX.into()) as u32
+    }
+    fn bool(&mut self) -> bool {
+        self.next() & 1 == 1
+    }
+    fn f32(&mut self) -> f32 {
+        let r = self.next();
+        match r % 8 {
+            0 => {
+                let special = [
+                    f32::NAN,
+                    f32::INFINITY,
+                    f32::NEG_INFINITY,
+                    0.0,
+                    -0.0,
+                    f32::MAX,
+                    f32::MIN,
+                ];
+                special
+                    .get((r >> 8) as usize % special.len())
+                    .copied()
+                    .unwrap_or(0.0)
+            }
+            1..=4 => ((r >> 16) as u32 % 100_000) as f32 / 1000.0 - 50.0,
+            _ => f32::from_bits((r >> 16) as u32),
+        }
+    }
+    fn assume(&mut self, cond: bool) -> bool {
+        if !cond {
+            self.accepted = false;
+        }
+        cond
+    }
+    fn record(&mut self, cond: bool, name: &'static str) {
+        let n = self.n_covers;
+        let slot = self.covers.iter().take(n).position(|c| c.0 == name);
+        let idx = match slot {
+            Some(i) => i,
+            None if n < MAX_COVERS => {
+                self.n_covers = n + 1;
+                if let Some(c) = self.covers.get_mut(n) {
+                    c.0 = name;
+                }
+                n
+            }
+            None => return,
+        };
+        if let Some(c) = self.covers.get_mut(idx) {
+            c.1 = c.1.saturating_add(1);
+            if cond {
+                c.2 = c.2.saturating_add(1);
+            }
+        }
+    }
+}

@@ -1,0 +1,453 @@
+//! The degradation ladder NORMAL → REDUCED → HOLD → STOP → BRAKE as a pure step function.
+//!
+//! ```text
+//!  valid frame ─┐        watchdog tick (1 kHz)
+//!               v              v
+//!   fresh = true        missed = fresh ? 0 : missed + 1
+//!
+//!   missed:  0    1    2 ........ 5 .............. 10
+//!            NORMAL/REDUCED  HOLD   STOP           BRAKE (latched)
+//!                            │      │              │
+//!   setpoint: commanded ───  └─ hold decel ─ stop decel ─ PWM off, low-side short
+//! ```
+//!
+//! Ticks are the only clock: [`Ladder::step`] never reads time, so every transition is a function
+//! of the event sequence and can be checked exhaustively (see `proofs/SAFETY.md`).
+
+use crate::config::Config;
+use crate::types::{Command, Condition, Drive, FaultFlags, Mode, Output, RejectReason, Speed};
+use crate::validate::{validate, Setpoint};
+
+/// Emergency-stop requests (seed 001 `ESTOP.action`).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum Estop {
+    /// Engage and latch the emergency stop (action = 1).
+    Engage,
+    /// Release the latch (action = 0); BRAKE stays latched until a re-arm.
+    Release,
+}
+
+/// Everything that can happen to the ladder.
+#[derive(Clone, Copy, Debug, PartialEq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum Event {
+    /// The 1 kHz watchdog tick: the only event that moves the setpoint.
+    Tick,
+    /// A frame that passed CRC and decoding; validated here.
+    Frame(Command),
+    /// A frame refused below the ladder (CRC, framing, decoding, version, parity).
+    Rejected(RejectReason),
+    /// A board condition became active or cleared.
+    Condition {
+        /// Which condition.
+        condition: Condition,
+        /// True when it became active, false when it cleared.
+        active: bool,
+    },
+    /// Emergency stop engaged or released.
+    Estop(Estop),
+    /// The host's shutdown bit (seed 004 `SHUTDOWN_MOTOR`), asserted or not.
+    Shutdown(bool),
+    /// An explicit re-arm request (a clear command from the host).
+    Rearm,
+}
+
+/// Saturating event counters, reported in diagnostics.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct Counters {
+    /// Watchdog ticks seen.
+    pub ticks: u32,
+    /// Frames that passed validation.
+    pub valid_frames: u32,
+    /// Refused frames, indexed by [`RejectReason::index`].
+    pub rejected: [u32; RejectReason::ALL.len()],
+    /// Ticks that found no fresh valid frame.
+    pub missed_ticks: u32,
+    /// Entries into HOLD.
+    pub hold_entries: u32,
+    /// Entries into BRAKE (latches).
+    pub brake_entries: u32,
+    /// Re-arms that released BRAKE.
+    pub rearms: u32,
+    /// Re-arm requests refused because a latching cause was still active.
+    pub rearm_refused: u32,
+}
+
+impl Counters {
+    /// How many frames were refused for `reason`.
+    pub fn rejected(&self, reason: RejectReason) -> u32 {
+        self.rejected.get(reason.index()).copied().unwrap_or(0)
+    }
+
+    /// All refused frames.
+    pub fn rejected_total(&self) -> u32 {
+        self.rejected.iter().fold(0u32, |a, b| a.saturating_add(*b))
+    }
+}
+
+/// Conditions that keep BRAKE latched while they are active: a re-arm is refused until they clear.
+pub const LATCHING: FaultFlags = FaultFlags(
+    FaultFlags::OVERCURRENT.0
+        | FaultFlags::OVERTEMPERATURE.0
+        | FaultFlags::ENCODER.0
+        | FaultFlags::UNDERVOLTAGE.0
+        | FaultFlags::ESTOP.0
+        | FaultFlags::SHUTDOWN.0,
+);
+
+/// Conditions that hold the ladder in REDUCED while active.
+pub const DEGRADING: FaultFlags =
+    FaultFlags(FaultFlags::THERMAL_WARNING.0 | FaultFlags::CLOCK_SYNC_LOST.0);
+
+/// The whole fail-safe state. Every field is plain data; [`Ladder::step`] is the only way it changes.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Ladder {
+    pub(crate) cfg: Config,
+    pub(crate) mode: Mode,
+    /// Setpoints applied after the last tick, [left, right].
+    pub(crate) applied: [Speed; 2],
+    /// Last valid command; cleared when BRAKE latches.
+    pub(crate) last: Option<Setpoint>,
+    /// Enable bit of the last valid frame, for the 0→1 re-arm edge.
+    pub(crate) prev_enable: bool,
+    /// A valid frame arrived since the last tick.
+    pub(crate) fresh: bool,
+    /// Consecutive ticks without a fresh valid frame (saturating).
+    pub(crate) missed: u16,
+    /// Ticks since the last valid frame (saturating), scaling the acceleration allowance.
+    pub(crate) since_valid: u16,
+    pub(crate) brake_latched: bool,
+    /// Why BRAKE latched (COMM_LOST, ESTOP, SHUTDOWN, conditions, POWER_ON).
+    pub(crate) latch_causes: FaultFlags,
+    /// Conditions active now, plus ESTOP and SHUTDOWN while set.
+    pub(crate) active: FaultFlags,
+    pub(crate) rearm_pending: bool,
+    pub(crate) degraded: bool,
+    /// Consecutive clean ticks while degraded.
+    pub(crate) clean_ticks: u16,
+    /// Position in the reject-counting window, < window.
+    pub(crate) window_pos: u16,
+    /// Rejects in the current window (saturating).
+    pub(crate) window_rejects: u16,
+    pub(crate) counters: Counters,
+}
+
+/// Moves `cur` toward `target` by at most `step` (step ≥ 0).
+pub const fn approach(cur: Speed, target: Speed, step: Speed) -> Speed {
+    if target.to_bits() > cur.to_bits() {
+        let gap = target.saturating_sub(cur);
+        if gap.to_bits() > step.to_bits() {
+            cur.saturating_add(step)
+        } else {
+            target
+        }
+    } else {
+        let gap = cur.saturating_sub(target);
+        if gap.to_bits() > step.to_bits() {
+            cur.saturating_sub(step)
+        } else {
+            target
+        }
+    }
+}
+
+/// Limits `x` to ±`limit` (limit ≥ 0), without the panic of `Ord::clamp`.
+pub const fn clamp_sym(x: Speed, limit: Speed) -> Speed {
+    let neg = limit.saturating_neg();
+    if x.to_bits() > limit.to_bits() {
+        limit
+    } else if x.to_bits() < neg.to_bits() {
+        neg
+    } else {
+        x
+    }
+}
+
+impl Ladder {
+    /// Power-on state: BRAKE latched with `POWER_ON`, so the drive starts only after an explicit arm
+    /// (ISO 3691-4: no automatic start) and fresh valid frames.
+    pub const fn new(cfg: Config) -> Self {
+        Self {
+            cfg,
+            mode: Mode::Brake,
+            applied: [Speed::ZERO; 2],
+            last: None,
+            prev_enable: false,
+            fresh: false,
+            missed: 0,
+            since_valid: 0,
+            brake_latched: true,
+            latch_causes: FaultFlags::POWER_ON,
+            active: FaultFlags::NONE,
+            rearm_pending: false,
+            degraded: true,
+            clean_ticks: 0,
+            window_pos: 0,
+            window_rejects: 0,
+            counters: Counters {
+                ticks: 0,
+                valid_frames: 0,
+                rejected: [0; RejectReason::ALL.len()],
+                missed_ticks: 0,
+                hold_entries: 0,
+                brake_entries: 0,
+                rearms: 0,
+                rearm_refused: 0,
+            },
+        }
+    }
+
+    /// The configuration in force.
+    pub const fn config(&self) -> &Config {
+        &self.cfg
+    }
+
+    /// The current rung.
+    pub const fn mode(&self) -> Mode {
+        self.mode
+    }
+
+    /// Setpoints applied after the last tick, [left, right] (zero in BRAKE).
+    pub const fn applied(&self) -> [Speed; 2] {
+        self.applied
+    }
+
+    /// The last valid command (None after BRAKE latched, until a new valid frame).
+    pub const fn last_valid(&self) -> Option<Setpoint> {
+        self.last
+    }
+
+    /// Consecutive ticks without a fresh valid frame.
+    pub const fn missed(&self) -> u16 {
+        self.missed
+    }
+
+    /// Event counters.
+    pub const fn counters(&self) -> &Counters {
+        &self.counters
+    }
+
+    /// True while BRAKE is latched.
+    pub const fn brake_latched(&self) -> bool {
+        self.brake_latched
+    }
+
+    /// Feeds one event and returns what to apply. Never panics; all arithmetic saturates.
+    pub fn step(&mut self, event: Event) -> Output {
+        match event {
+            Event::Tick => self.tick(),
+            Event::Frame(cmd) => self.frame(&cmd),
+            Event::Rejected(reason) => self.reject(reason),
+            Event::Condition { condition, active } => {
+                let flag = condition.flag();
+                if active {
+                    self.active = self.active.union(flag);
+                    if condition.brakes() {
+                        self.latch(flag);
+                    }
+                } else {
+                    self.active = self.active.without(flag);
+                }
+            }
+            Event::Estop(Estop::Engage) => {
+                self.active = self.active.union(FaultFlags::ESTOP);
+                self.latch(FaultFlags::ESTOP);
+            }
+            Event::Estop(Estop::Release) => {
+                self.active = self.active.without(FaultFlags::ESTOP);
+            }
+            Event::Shutdown(true) => {
+                self.active = self.active.union(FaultFlags::SHUTDOWN);
+                self.latch(FaultFlags::SHUTDOWN);
+            }
+            Event::Shutdown(false) => {
+                self.active = self.active.without(FaultFlags::SHUTDOWN);
+            }
+            Event::Rearm => self.request_rearm(),
+        }
+        self.output()
+    }
+
+    /// What the current state tells the bridge, without changing anything.
+    pub fn output(&self) -> Output {
+        let p = self.cfg.params();
+        let limit = match self.mode {
+            Mode::Normal => p.v_max,
+            Mode::Reduced => p.reduced_limit,
+            Mode::Hold | Mode::Stop | Mode::Brake => Speed::ZERO,
+        };
+        let drive = if self.mode == Mode::Brake {
+            Drive::Brake
+        } else {
+            Drive::Run {
+                left: self.applied[0],
+                right: self.applied[1],
+            }
+        };
+        let mut faults = self.active.union(self.latch_causes);
+        if self.brake_latched {
+            faults = faults.union(FaultFlags::BRAKE_LATCHED);
+        }
+        if self.degraded {
+            faults = faults.union(FaultFlags::LINK_DEGRADED);
+        }
+        Output {
+            mode: self.mode,
+            drive,
+            limit,
+            faults,
+            missed: self.missed,
+        }
+    }
+
+    fn latch(&mut self, cause: FaultFlags) {
+        if !self.brake_latched {
+            self.counters.brake_entries = self.counters.brake_entries.saturating_add(1);
+        }
+        self.brake_latched = true;
+        self.latch_causes = self.latch_causes.union(cause);
+        self.mode = Mode::Brake;
+        self.applied = [Speed::ZERO; 2];
+        self.last = None;
+        self.rearm_pending = false;
+    }
+
+    fn request_rearm(&mut self) {
+        if !self.brake_latched {
+            return;
+        }
+        if self.active.intersects(LATCHING) {
+            self.counters.rearm_refused = self.counters.rearm_refused.saturating_add(1);
+            self.rearm_pending = false;
+        } else {
+            self.rearm_pending = true;
+        }
+    }
+
+    fn reject(&mut self, reason: RejectReason) {
+        if let Some(c) = self.counters.rejected.get_mut(reason.index()) {
+            *c = c.saturating_add(1);
+        }
+        self.window_rejects = self.window_rejects.saturating_add(1);
+        if self.window_rejects >= self.cfg.params().reject_limit {
+            self.degraded = true;
+            self.clean_ticks = 0;
+        }
+    }
+
+    fn frame(&mut self, cmd: &Command) {
+        let p = self.cfg.params();
+        let allowance = p
+            .max_cmd_step
+            .saturating_mul_int(i32::from(self.since_valid.max(1)));
+        match validate(cmd, self.last.as_ref(), allowance, &self.cfg) {
+            Err(reason) => self.reject(reason),
+            Ok(sp) => {
+                self.counters.valid_frames = self.counters.valid_frames.saturating_add(1);
+                let rising = sp.enable && !self.prev_enable;
+                self.prev_enable = sp.enable;
+                self.last = Some(sp);
+                self.fresh = true;
+                self.since_valid = 0;
+                if rising {
+                    self.request_rearm();
+                }
+            }
+        }
+    }
+
+    fn tick(&mut self) {
+        let p = *self.cfg.params();
+        self.counters.ticks = self.counters.ticks.saturating_add(1);
+        if self.fresh {
+            self.missed = 0;
+            self.fresh = false;
+        } else {
+            self.missed = self.missed.saturating_add(1);
+            self.counters.missed_ticks = self.counters.missed_ticks.saturating_add(1);
+        }
+        self.since_valid = self.since_valid.saturating_add(1);
+
+        self.window_pos = self.window_pos.saturating_add(1);
+        if self.window_pos >= p.window {
+            self.window_pos = 0;
+            self.window_rejects = 0;
+        }
+
+        if self.missed >= p.brake_after {
+            self.latch(FaultFlags::COMM_LOST);
+        }
+
+        let enabled = matches!(self.last, Some(Setpoint { enable: true, .. }));
+        if self.brake_latched
+            && self.rearm_pending
+            && !self.active.intersects(LATCHING)
+            && self.missed == 0
+            && enabled
+        {
+            self.brake_latched = false;
+            self.latch_causes = FaultFlags::NONE;
+            self.rearm_pending = false;
+            self.degraded = true;
+            self.clean_ticks = 0;
+            self.counters.rearms = self.counters.rearms.saturating_add(1);
+        }
+
+        let link_late = self.missed >= p.hold_after;
+        let mode = if self.brake_latched {
+            Mode::Brake
+        } else if self.missed >= p.stop_after || !enabled {
+            Mode::Stop
+        } else if link_late {
+            Mode::Hold
+        } else if self.degraded || self.active.intersects(DEGRADING) {
+            Mode::Reduced
+        } else {
+            Mode::Normal
+        };
+
+        if mode == Mode::Hold && self.mode != Mode::Hold {
+            self.counters.hold_entries = self.counters.hold_entries.saturating_add(1);
+        }
+        if link_late || self.active.intersects(DEGRADING) {
+            self.degraded = true;
+            self.clean_ticks = 0;
+        } else if self.degraded && mode != Mode::Brake {
+            self.clean_ticks = self.clean_ticks.saturating_add(1);
+            if self.clean_ticks >= p.window && self.window_rejects < p.reject_limit {
+                self.degraded = false;
+                self.clean_ticks = 0;
+            }
+        }
+
+        self.mode = mode;
+        self.applied = match mode {
+            Mode::Brake => [Speed::ZERO; 2],
+            Mode::Stop => self
+                .applied
+                .map(|a| approach(a, Speed::ZERO, p.stop_decel_step)),
+            Mode::Hold => self
+                .applied
+                .map(|a| approach(a, Speed::ZERO, p.hold_decel_step)),
+            Mode::Normal | Mode::Reduced => {
+                let limit = if mode == Mode::Normal {
+                    p.v_max
+                } else {
+                    p.reduced_limit
+                };
+                let [tl, tr] = match self.last {
+                    Some(sp) if sp.drives() => {
+                        [clamp_sym(sp.left, limit), clamp_sym(sp.right, limit)]
+                    }
+                    _ => [Speed::ZERO; 2],
+                };
+                [
+                    approach(self.applied[0], tl, p.accel_step),
+                    approach(self.applied[1], tr, p.accel_step),
+                ]
+            }
+        };
+    }
+}

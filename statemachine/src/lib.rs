@@ -1,0 +1,34 @@
+//! Pure fail-safe core of the motor controller: the NORMAL → REDUCED → HOLD → STOP → BRAKE ladder,
+//! the link watchdog and host-command validation.
+//!
+//! No clock, no peripheral, no allocation, no `unsafe`: the firmware and the simulator feed the same
+//! [`Event`]s to [`Ladder::step`] and apply the returned [`Output`]. The safety case that this crate
+//! implements is `proofs/SAFETY.md`; its invariants are checked by the harnesses in `verification`
+//! (Kani) and by their `cargo test` twins.
+#![no_std]
+#![forbid(unsafe_code)]
+#![cfg_attr(
+    test,
+    allow(
+        clippy::unwrap_used,
+        clippy::indexing_slicing,
+        clippy::arithmetic_side_effects,
+        clippy::panic
+    )
+)]
+
+pub mod config;
+pub mod harness;
+pub mod ladder;
+pub mod types;
+pub mod validate;
+
+#[cfg(any(test, kani))]
+mod verification;
+
+pub use config::{Config, ConfigError, ConfigParams};
+pub use ladder::{Counters, Estop, Event, Ladder};
+pub use types::{
+    Command, Condition, ControlMode, Drive, FaultFlags, Mode, Output, RejectReason, Speed,
+};
+pub use validate::{validate, Setpoint};

@@ -1,0 +1,1 @@
+//! Kani harnesses of the ladder invariants and their `cargo test` twins.
