@@ -15,7 +15,9 @@
 //! of the event sequence and can be checked exhaustively (see `proofs/SAFETY.md`).
 
 use crate::config::Config;
-use crate::types::{Command, Condition, Drive, FaultFlags, Mode, Output, RejectReason, Speed};
+use crate::types::{
+    Command, Condition, ControlMode, Drive, FaultFlags, Mode, Output, RejectReason, Speed,
+};
 use crate::validate::{validate, Setpoint};
 
 /// Emergency-stop requests (seed 001 `ESTOP.action`).
@@ -110,7 +112,9 @@ pub struct Ladder {
     pub(crate) applied: [Speed; 2],
     /// Last valid command; cleared when BRAKE latches.
     pub(crate) last: Option<Setpoint>,
-    /// Enable bit of the last valid frame, for the 0→1 re-arm edge.
+    /// Enable bit of the last valid frame, for the 0→1 re-arm edge. Set to true whenever BRAKE latches,
+    /// so only an enable = 0 frame seen after the latch, then an enable = 1 frame, makes an edge: a host that
+    /// keeps sending enable = 1 across an MCU reset or a link loss never restarts the drive by itself.
     pub(crate) prev_enable: bool,
     /// A valid frame arrived since the last tick.
     pub(crate) fresh: bool,
@@ -174,7 +178,7 @@ impl Ladder {
             mode: Mode::Brake,
             applied: [Speed::ZERO; 2],
             last: None,
-            prev_enable: false,
+            prev_enable: true,
             fresh: false,
             missed: 0,
             since_valid: 0,
@@ -232,6 +236,40 @@ impl Ladder {
     /// True while BRAKE is latched.
     pub const fn brake_latched(&self) -> bool {
         self.brake_latched
+    }
+
+    /// The invariant every reachable state satisfies (INV-0 in `proofs/SAFETY.md`).
+    ///
+    /// `Ladder::new` satisfies it and every [`Ladder::step`] preserves it (`verify_step_preserves_invariant`),
+    /// so harnesses may start from any state that satisfies it: an over-approximation of the reachable set.
+    pub fn is_valid(&self) -> bool {
+        let p = self.cfg.params();
+        let within = |s: Speed| s <= p.v_max && s >= p.v_max.saturating_neg();
+        let applied_ok = self.applied.iter().all(|a| within(*a));
+        let last_ok = match self.last {
+            None => true,
+            Some(sp) => {
+                within(sp.left)
+                    && within(sp.right)
+                    && !matches!(sp.mode, ControlMode::Position | ControlMode::RawDuty)
+            }
+        };
+        let mode_ok = match self.mode {
+            Mode::Normal | Mode::Reduced => self.missed < p.hold_after,
+            Mode::Hold => self.missed >= p.hold_after && self.missed < p.stop_after,
+            Mode::Stop => self.missed < p.brake_after,
+            Mode::Brake => self.applied == [Speed::ZERO; 2],
+        };
+        applied_ok
+            && last_ok
+            && mode_ok
+            && (self.mode == Mode::Brake) == self.brake_latched
+            && self.brake_latched == !self.latch_causes.is_empty()
+            && (self.brake_latched || (self.missed < p.brake_after && self.last.is_some()))
+            && (!self.active.intersects(LATCHING) || self.brake_latched)
+            && (!self.rearm_pending || self.brake_latched)
+            && self.window_pos < p.window
+            && self.clean_ticks < p.window
     }
 
     /// Feeds one event and returns what to apply. Never panics; all arithmetic saturates.
@@ -311,6 +349,7 @@ impl Ladder {
         self.mode = Mode::Brake;
         self.applied = [Speed::ZERO; 2];
         self.last = None;
+        self.prev_enable = true;
         self.rearm_pending = false;
     }
 
@@ -331,7 +370,8 @@ impl Ladder {
             *c = c.saturating_add(1);
         }
         self.window_rejects = self.window_rejects.saturating_add(1);
-        if self.window_rejects >= self.cfg.params().reject_limit {
+        // Degrade at the limit; once degraded, any reject restarts the clean window.
+        if self.degraded || self.window_rejects >= self.cfg.params().reject_limit {
             self.degraded = true;
             self.clean_ticks = 0;
         }
@@ -416,7 +456,7 @@ impl Ladder {
             self.clean_ticks = 0;
         } else if self.degraded && mode != Mode::Brake {
             self.clean_ticks = self.clean_ticks.saturating_add(1);
-            if self.clean_ticks >= p.window && self.window_rejects < p.reject_limit {
+            if self.clean_ticks >= p.window {
                 self.degraded = false;
                 self.clean_ticks = 0;
             }
@@ -449,5 +489,311 @@ impl Ladder {
                 ]
             }
         };
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::config::ConfigParams;
+
+    const P: ConfigParams = ConfigParams::DEFAULT;
+
+    fn cmd(speed: f32, enable: bool) -> Event {
+        Event::Frame(Command {
+            left: speed,
+            right: -speed,
+            mode: 1,
+            enable,
+            seq: None,
+        })
+    }
+
+    /// A ladder armed the way a host does it: enable 0, then enable 1, frame + tick each millisecond.
+    fn armed() -> Ladder {
+        let mut l = Ladder::new(Config::DEFAULT);
+        l.step(cmd(0.0, false));
+        l.step(Event::Tick);
+        l.step(cmd(0.0, true));
+        let out = l.step(Event::Tick);
+        assert_eq!(out.mode, Mode::Reduced, "armed ladder starts in REDUCED");
+        l
+    }
+
+    /// Frame + tick per millisecond until the ladder runs NORMAL at `speed` (rad/s).
+    fn cruising(speed: f32) -> Ladder {
+        let mut l = armed();
+        let mut v = 0.0f32;
+        for _ in 0..2000 {
+            v = (v + 0.04).min(speed);
+            l.step(cmd(v, true));
+            l.step(Event::Tick);
+        }
+        assert_eq!(l.mode(), Mode::Normal);
+        assert_eq!(l.applied()[0], Speed::from_num(speed));
+        l
+    }
+
+    #[test]
+    fn power_on_is_braked_and_ticks_alone_never_arm() {
+        let mut l = Ladder::new(Config::DEFAULT);
+        assert!(l.is_valid());
+        for _ in 0..100 {
+            assert_eq!(l.step(Event::Tick).drive, Drive::Brake);
+        }
+        // Frames with enable = 1 but no 0→1 edge do not arm either.
+        for _ in 0..100 {
+            l.step(cmd(0.0, true));
+            assert_eq!(l.step(Event::Tick).mode, Mode::Brake);
+        }
+        assert!(l.step(Event::Tick).faults.contains(FaultFlags::POWER_ON));
+    }
+
+    #[test]
+    fn comm_loss_walks_the_ladder_at_the_seed_thresholds() {
+        let mut l = cruising(5.0);
+        // Seed 000: HOLD after 2 missed cycles, STOP at 5, BRAKE at 10 ms.
+        let expected = [
+            Mode::Normal,
+            Mode::Hold,
+            Mode::Hold,
+            Mode::Hold,
+            Mode::Stop,
+            Mode::Stop,
+            Mode::Stop,
+            Mode::Stop,
+            Mode::Stop,
+            Mode::Brake,
+        ];
+        for (i, want) in expected.iter().enumerate() {
+            let out = l.step(Event::Tick);
+            assert_eq!(out.mode, *want, "tick {}", i + 1);
+            assert_eq!(out.missed as usize, i + 1);
+        }
+        let out = l.output();
+        assert_eq!(out.drive, Drive::Brake);
+        assert!(out
+            .faults
+            .contains(FaultFlags::COMM_LOST.union(FaultFlags::BRAKE_LATCHED)));
+    }
+
+    #[test]
+    fn hold_and_stop_decelerate_at_their_configured_rates() {
+        let mut l = cruising(5.0);
+        let v0 = l.applied()[0];
+        l.step(Event::Tick); // missed 1: NORMAL, still at speed
+        assert_eq!(l.applied()[0], v0);
+        l.step(Event::Tick); // missed 2: HOLD, one hold step
+        assert_eq!(l.applied()[0], v0 - P.hold_decel_step);
+        assert_eq!(
+            l.applied()[1],
+            -(v0 - P.hold_decel_step),
+            "right wheel decelerates toward zero too"
+        );
+        l.step(Event::Tick);
+        l.step(Event::Tick);
+        l.step(Event::Tick); // missed 5: STOP
+        assert_eq!(
+            l.applied()[0],
+            v0 - P.hold_decel_step * 3 - P.stop_decel_step
+        );
+    }
+
+    #[test]
+    fn one_late_frame_is_not_a_hold() {
+        let mut l = cruising(3.0);
+        l.step(Event::Tick); // frame late by < 1 tick: one missed tick
+        l.step(cmd(3.0, true));
+        assert_eq!(l.step(Event::Tick).mode, Mode::Normal);
+    }
+
+    #[test]
+    fn frames_resuming_after_stop_recover_without_rearm_but_reduced() {
+        let mut l = cruising(3.0);
+        for _ in 0..6 {
+            l.step(Event::Tick);
+        }
+        assert_eq!(l.mode(), Mode::Stop);
+        let v = l.applied()[0].to_num::<f32>();
+        l.step(cmd(v, true));
+        assert_eq!(l.step(Event::Tick).mode, Mode::Reduced);
+        for _ in 0..1000 {
+            l.step(cmd(v.min(10.0), true));
+            l.step(Event::Tick);
+        }
+        assert_eq!(l.mode(), Mode::Normal, "clean window restores NORMAL");
+    }
+
+    #[test]
+    fn rejected_frames_change_only_counters_then_degrade() {
+        let mut l = cruising(4.0);
+        let before = l;
+        l.step(Event::Rejected(RejectReason::Crc));
+        assert_eq!(l.applied(), before.applied());
+        assert_eq!(l.last_valid(), before.last_valid());
+        assert_eq!(l.mode(), Mode::Normal);
+        assert_eq!(l.counters().rejected(RejectReason::Crc), 1);
+        // An in-range frame that jumps faster than the acceleration limit is refused too.
+        l.step(cmd(8.0, true));
+        assert_eq!(l.applied(), before.applied());
+        assert_eq!(l.counters().rejected(RejectReason::Acceleration), 1);
+        l.step(Event::Frame(Command {
+            left: f32::NAN,
+            right: 0.0,
+            mode: 1,
+            enable: true,
+            seq: None,
+        }));
+        assert_eq!(l.counters().rejected(RejectReason::NonFinite), 1);
+        // Third reject in the window: REDUCED from the next tick, speed ramps down to the reduced limit.
+        l.step(cmd(4.0, true));
+        assert_eq!(l.step(Event::Tick).mode, Mode::Reduced);
+    }
+
+    #[test]
+    fn reduced_ramps_down_instead_of_jumping() {
+        let mut l = cruising(15.0);
+        for _ in 0..3 {
+            l.step(Event::Rejected(RejectReason::Crc));
+        }
+        l.step(cmd(15.0, true));
+        let out = l.step(Event::Tick);
+        assert_eq!(out.mode, Mode::Reduced);
+        assert_eq!(out.limit, P.reduced_limit);
+        assert_eq!(l.applied()[0], Speed::from_num(15) - P.accel_step);
+        for _ in 0..200 {
+            l.step(cmd(15.0, true));
+            l.step(Event::Tick);
+        }
+        assert_eq!(l.applied()[0], P.reduced_limit);
+    }
+
+    #[test]
+    fn estop_latches_and_needs_release_then_rearm_then_fresh_frames() {
+        let mut l = cruising(2.0);
+        let out = l.step(Event::Estop(Estop::Engage));
+        assert_eq!(out.drive, Drive::Brake, "same step");
+        // Re-arm while engaged: refused.
+        l.step(Event::Rearm);
+        assert_eq!(l.counters().rearm_refused, 1);
+        l.step(cmd(0.0, true));
+        assert_eq!(l.step(Event::Tick).mode, Mode::Brake);
+        // Release alone does not restart.
+        l.step(Event::Estop(Estop::Release));
+        l.step(cmd(0.0, true));
+        assert_eq!(l.step(Event::Tick).mode, Mode::Brake);
+        // Explicit re-arm, but no fresh frame before the tick: still braked.
+        l.step(Event::Rearm);
+        assert_eq!(l.step(Event::Tick).mode, Mode::Brake);
+        l.step(cmd(0.0, true));
+        assert_eq!(l.step(Event::Tick).mode, Mode::Reduced);
+        assert_eq!(l.counters().rearms, 2, "power-on arm and this one");
+    }
+
+    #[test]
+    fn overcurrent_cuts_pwm_in_the_same_step_and_blocks_rearm_while_active() {
+        let mut l = cruising(6.0);
+        let out = l.step(Event::Condition {
+            condition: Condition::Overcurrent,
+            active: true,
+        });
+        assert_eq!(out.drive, Drive::Brake);
+        assert!(out.faults.contains(FaultFlags::OVERCURRENT));
+        l.step(cmd(0.0, false));
+        l.step(Event::Tick);
+        l.step(cmd(0.0, true)); // enable edge while the fault is active
+        assert_eq!(l.step(Event::Tick).mode, Mode::Brake);
+        assert_eq!(l.counters().rearm_refused, 1);
+        l.step(Event::Condition {
+            condition: Condition::Overcurrent,
+            active: false,
+        });
+        l.step(cmd(0.0, false));
+        l.step(Event::Tick);
+        l.step(cmd(0.0, true));
+        assert_eq!(l.step(Event::Tick).mode, Mode::Reduced);
+    }
+
+    #[test]
+    fn shutdown_bit_brakes_immediately() {
+        let mut l = cruising(1.0);
+        assert_eq!(l.step(Event::Shutdown(true)).drive, Drive::Brake);
+        assert!(l.output().faults.contains(FaultFlags::SHUTDOWN));
+    }
+
+    #[test]
+    fn comm_lost_brake_needs_an_enable_edge() {
+        let mut l = cruising(1.0);
+        for _ in 0..10 {
+            l.step(Event::Tick);
+        }
+        assert_eq!(l.mode(), Mode::Brake);
+        for _ in 0..50 {
+            l.step(cmd(0.0, true));
+            assert_eq!(
+                l.step(Event::Tick).mode,
+                Mode::Brake,
+                "resumed frames alone never restart"
+            );
+        }
+        l.step(cmd(0.0, false));
+        l.step(Event::Tick);
+        l.step(cmd(0.0, true));
+        assert_eq!(l.step(Event::Tick).mode, Mode::Reduced);
+    }
+
+    #[test]
+    fn disable_stops_with_the_loop_active_and_enable_resumes() {
+        let mut l = cruising(2.0);
+        l.step(cmd(2.0, false));
+        let out = l.step(Event::Tick);
+        assert_eq!(out.mode, Mode::Stop);
+        assert_eq!(
+            out.drive,
+            Drive::Run {
+                left: Speed::from_num(2) - P.stop_decel_step,
+                right: -(Speed::from_num(2) - P.stop_decel_step)
+            }
+        );
+        l.step(cmd(0.0, true));
+        assert_ne!(l.step(Event::Tick).mode, Mode::Stop);
+    }
+
+    #[test]
+    fn thermal_warning_holds_reduced_while_active() {
+        let mut l = cruising(2.0);
+        l.step(Event::Condition {
+            condition: Condition::ThermalWarning,
+            active: true,
+        });
+        l.step(cmd(2.0, true));
+        assert_eq!(l.step(Event::Tick).mode, Mode::Reduced);
+        l.step(Event::Condition {
+            condition: Condition::ThermalWarning,
+            active: false,
+        });
+        // A clean window is 1000 ticks spent in REDUCED; NORMAL from the tick after.
+        for _ in 0..1000 {
+            l.step(cmd(2.0, true));
+            assert_eq!(l.step(Event::Tick).mode, Mode::Reduced);
+        }
+        l.step(cmd(2.0, true));
+        assert_eq!(l.step(Event::Tick).mode, Mode::Normal);
+    }
+
+    #[test]
+    fn approach_and_clamp() {
+        let s = |x: f32| Speed::from_num(x);
+        assert_eq!(approach(s(1.0), s(2.0), s(0.25)), s(1.25));
+        assert_eq!(approach(s(1.0), s(1.1), s(0.25)), s(1.1));
+        assert_eq!(approach(s(0.1), s(-1.0), s(0.25)), s(-0.15));
+        // Extremes saturate instead of overflowing (configured speeds stay far inside this range).
+        assert_eq!(approach(Speed::MIN, Speed::MAX, Speed::MAX), Speed::MAX);
+        assert_eq!(
+            approach(Speed::MAX, Speed::MIN, Speed::from_bits(1)),
+            Speed::MAX - Speed::from_bits(1)
+        );
+        assert_eq!(clamp_sym(s(-30.0), s(20.0)), s(-20.0));
+        assert_eq!(clamp_sym(s(3.0), s(20.0)), s(3.0));
     }
 }
