@@ -264,7 +264,7 @@ impl Ladder {
             && last_ok
             && mode_ok
             && (self.mode == Mode::Brake) == self.brake_latched
-            && self.brake_latched == !self.latch_causes.is_empty()
+            && self.brake_latched != self.latch_causes.is_empty()
             && (self.brake_latched || (self.missed < p.brake_after && self.last.is_some()))
             && (!self.active.intersects(LATCHING) || self.brake_latched)
             && (!self.rearm_pending || self.brake_latched)
