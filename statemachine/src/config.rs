@@ -14,11 +14,11 @@ pub const MAX_WINDOW: u16 = 60_000;
 /// Raw configuration values before validation; [`Config::new`] checks them.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct ConfigParams {
-    /// Missed ticks before HOLD (seed: "2 missed cycles").
+    /// Ticks since the last valid frame before HOLD (seed: "2 missed cycles").
     pub hold_after: u16,
-    /// Missed ticks before STOP.
+    /// Ticks since the last valid frame before STOP.
     pub stop_after: u16,
-    /// Missed ticks before BRAKE (seed: 10 ms); at most [`MAX_BRAKE_AFTER`].
+    /// Ticks since the last valid frame before BRAKE (seed: 10 ms); at most [`MAX_BRAKE_AFTER`].
     pub brake_after: u16,
     /// Largest wheel speed magnitude accepted from the host, rad/s.
     pub v_max: Speed,
@@ -32,15 +32,15 @@ pub struct ConfigParams {
     pub hold_decel_step: Speed,
     /// Deceleration per tick in STOP, rad/s.
     pub stop_decel_step: Speed,
-    /// Rejected frames within one window that degrade NORMAL to REDUCED.
-    pub reject_limit: u16,
-    /// Window length in ticks: counting rejects, and the clean time REDUCED needs before NORMAL.
+    /// Strikes (refused frames and entries into HOLD) within one window that degrade NORMAL to REDUCED.
+    pub strike_limit: u16,
+    /// Window length in ticks: counting strikes, and the clean time REDUCED needs before NORMAL.
     pub window: u16,
 }
 
 impl ConfigParams {
-    /// The seed's figures: HOLD at 2 missed ticks, STOP at 5, BRAKE at 10; 20 rad/s, half in REDUCED;
-    /// 50 rad/s² command acceleration, 100 rad/s² STOP deceleration; 3 rejects per 1 s window.
+    /// The seed's figures: HOLD 2 ticks after the last valid frame, STOP at 5, BRAKE at 10; 20 rad/s, half in REDUCED;
+    /// 50 rad/s² command acceleration, 100 rad/s² STOP deceleration; 3 strikes per 1 s window.
     pub const DEFAULT: Self = Self {
         hold_after: 2,
         stop_after: 5,
@@ -54,7 +54,7 @@ impl ConfigParams {
         hold_decel_step: Speed::from_bits(1311),
         // STOP: 100 rad/s² (0.1 rad/s per tick).
         stop_decel_step: Speed::from_bits(6554),
-        reject_limit: 3,
+        strike_limit: 3,
         window: 1000,
     };
 }
@@ -80,8 +80,8 @@ pub enum ConfigError {
     ReducedLimit = 4,
     /// Every step must be positive and at most v_max.
     Step = 5,
-    /// reject_limit must be at least 1.
-    RejectLimit = 6,
+    /// strike_limit must be at least 1.
+    StrikeLimit = 6,
     /// window must be between 1 and [`MAX_WINDOW`] ticks.
     Window = 7,
 }
@@ -117,8 +117,8 @@ impl Config {
         {
             return Err(ConfigError::Step);
         }
-        if p.reject_limit == 0 {
-            return Err(ConfigError::RejectLimit);
+        if p.strike_limit == 0 {
+            return Err(ConfigError::StrikeLimit);
         }
         if p.window == 0 || p.window > MAX_WINDOW {
             return Err(ConfigError::Window);
@@ -217,10 +217,10 @@ mod tests {
             ),
             (
                 ConfigParams {
-                    reject_limit: 0,
+                    strike_limit: 0,
                     ..d
                 },
-                ConfigError::RejectLimit,
+                ConfigError::StrikeLimit,
             ),
             (ConfigParams { window: 0, ..d }, ConfigError::Window),
         ];

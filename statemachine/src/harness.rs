@@ -33,6 +33,8 @@ pub trait Source {
     fn speed(&mut self) -> Speed {
         Speed::from_bits(self.i32())
     }
+    /// Any speed in `-max ..= max` (max ≥ 0). Kani: any value, assumed in range; tests: biased to the ends.
+    fn speed_within(&mut self, max: Speed) -> Speed;
     /// A value in `0..n` (n ≥ 1); used to pick among enum variants.
     fn below(&mut self, n: u8) -> u8 {
         self.u8().checked_rem(n).unwrap_or(0)
@@ -82,6 +84,11 @@ impl Source for KaniSource {
     }
     fn f32(&mut self) -> f32 {
         kani::any()
+    }
+    fn speed_within(&mut self, max: Speed) -> Speed {
+        let s: Speed = Speed::from_bits(kani::any());
+        kani::assume(s <= max && s >= max.saturating_neg());
+        s
     }
     fn assume(&mut self, cond: bool) -> bool {
         kani::assume(cond);
@@ -226,9 +233,22 @@ impl Source for Twin {
                     .copied()
                     .unwrap_or(0.0)
             }
-            1..=4 => ((r >> 16) as u32 % 100_000) as f32 / 1000.0 - 50.0,
+            1 | 2 => ((r >> 16) as u32 % 100_000) as f32 / 1000.0 - 50.0,
+            3 | 4 => ((r >> 16) as u32 % 201) as f32 * 0.5 - 50.0,
             _ => f32::from_bits((r >> 16) as u32),
         }
+    }
+    fn speed_within(&mut self, max: Speed) -> Speed {
+        let m = i64::from(max.to_bits().max(0));
+        let r = self.next();
+        let bits = match r % 6 {
+            0 => m,
+            1 => -m,
+            2 => 0,
+            3 => (r >> 8) as i64 % 16 - 8,
+            _ => ((r >> 8) % (2 * m as u64 + 1)) as i64 - m,
+        };
+        Speed::from_bits(bits.clamp(-m, m) as i32)
     }
     fn assume(&mut self, cond: bool) -> bool {
         if !cond {
@@ -255,6 +275,190 @@ impl Source for Twin {
             if cond {
                 c.2 = c.2.saturating_add(1);
             }
+        }
+    }
+}
+
+/// Generators shared by the harnesses of this crate and of `proofs`: each draws every field from a
+/// [`Source`], so under Kani they stand for *all* values, and under tests for many biased ones.
+pub mod arbitrary {
+    use super::Source;
+    use crate::config::{Config, ConfigParams};
+    use crate::ladder::{Counters, Estop, Event, Ladder};
+    use crate::types::{Command, Condition, ControlMode, FaultFlags, Mode, RejectReason, Speed};
+    use crate::validate::Setpoint;
+
+    /// Any configuration [`Config::new`] accepts; half the time the default (so tests meet it often).
+    pub fn config(src: &mut impl Source) -> Option<Config> {
+        if src.bool() {
+            return Some(Config::DEFAULT);
+        }
+        let v_max = src.speed_within(crate::config::V_MAX_CEILING);
+        let p = ConfigParams {
+            hold_after: u16::from(src.below(12)),
+            stop_after: u16::from(src.below(12)),
+            brake_after: u16::from(src.below(12)),
+            v_max,
+            reduced_limit: src.speed_within(v_max),
+            max_cmd_step: src.speed_within(v_max),
+            accel_step: src.speed_within(v_max),
+            hold_decel_step: src.speed_within(v_max),
+            stop_decel_step: src.speed_within(v_max),
+            strike_limit: src.u16(),
+            window: src.u16(),
+        };
+        Config::new(p).ok()
+    }
+
+    /// Any control mode the wire can carry (a valid one half the time).
+    pub fn raw_mode(src: &mut impl Source) -> u32 {
+        if src.bool() {
+            u32::from(src.below(4))
+        } else {
+            src.u32()
+        }
+    }
+
+    /// Any command, NaN and out-of-range speeds included.
+    pub fn command(src: &mut impl Source) -> Command {
+        Command {
+            left: src.f32(),
+            right: src.f32(),
+            mode: raw_mode(src),
+            enable: src.bool(),
+            seq: if src.bool() { Some(src.u32()) } else { None },
+        }
+    }
+
+    /// Any setpoint validation could have produced under `cfg`.
+    pub fn setpoint(src: &mut impl Source, cfg: &Config) -> Setpoint {
+        let v = cfg.params().v_max;
+        Setpoint {
+            left: src.speed_within(v),
+            right: src.speed_within(v),
+            mode: if src.bool() {
+                ControlMode::Speed
+            } else {
+                ControlMode::Idle
+            },
+            enable: src.bool(),
+            seq: if src.bool() { Some(src.u32()) } else { None },
+        }
+    }
+
+    /// Any refusal reason.
+    pub fn reason(src: &mut impl Source) -> RejectReason {
+        let i = usize::from(src.below(RejectReason::ALL.len() as u8));
+        RejectReason::ALL
+            .get(i)
+            .copied()
+            .unwrap_or(RejectReason::Crc)
+    }
+
+    /// Any board condition.
+    pub fn condition(src: &mut impl Source) -> Condition {
+        let i = usize::from(src.below(Condition::ALL.len() as u8));
+        Condition::ALL
+            .get(i)
+            .copied()
+            .unwrap_or(Condition::Overcurrent)
+    }
+
+    /// Any event.
+    pub fn event(src: &mut impl Source) -> Event {
+        match src.below(7) {
+            0 => Event::Tick,
+            1 => Event::Frame(command(src)),
+            2 => Event::Rejected(reason(src)),
+            3 => Event::Condition {
+                condition: condition(src),
+                active: src.bool(),
+            },
+            4 => Event::Estop(if src.bool() {
+                Estop::Engage
+            } else {
+                Estop::Release
+            }),
+            5 => Event::Shutdown(src.bool()),
+            _ => Event::Rearm,
+        }
+    }
+
+    /// Any event that is not a valid frame: what the ladder sees while the link is lost
+    /// (refusals, faults, operator actions, and frames that cannot validate).
+    pub fn event_without_valid_frame(src: &mut impl Source) -> Event {
+        match event(src) {
+            Event::Frame(c) => Event::Frame(Command {
+                left: f32::NAN,
+                ..c
+            }),
+            e => e,
+        }
+    }
+
+    /// Any mode.
+    pub fn mode(src: &mut impl Source) -> Mode {
+        match src.below(5) {
+            0 => Mode::Normal,
+            1 => Mode::Reduced,
+            2 => Mode::Hold,
+            3 => Mode::Stop,
+            _ => Mode::Brake,
+        }
+    }
+
+    /// Any ladder state under `cfg`; callers `assume!` [`Ladder::is_valid`]. Fields the invariant pins to
+    /// each other (brake latch and mode) are drawn together so the tests waste fewer cases.
+    pub fn ladder(src: &mut impl Source, cfg: Config) -> Ladder {
+        let p = *cfg.params();
+        let mode = mode(src);
+        let brake_latched = mode == Mode::Brake;
+        let mut rejected = [0u32; RejectReason::ALL.len()];
+        for r in rejected.iter_mut() {
+            *r = src.u32();
+        }
+        Ladder {
+            cfg,
+            mode,
+            applied: if brake_latched {
+                [Speed::ZERO; 2]
+            } else {
+                [src.speed_within(p.v_max), src.speed_within(p.v_max)]
+            },
+            last: if src.bool() {
+                Some(setpoint(src, &cfg))
+            } else {
+                None
+            },
+            prev_enable: src.bool(),
+            age: if src.bool() {
+                u16::from(src.below(12))
+            } else {
+                src.u16()
+            },
+            brake_latched,
+            latch_causes: if brake_latched {
+                FaultFlags(src.u16())
+            } else {
+                FaultFlags::NONE
+            },
+            // Sparse bits for the tests; still every value under Kani (x & y & z covers all of u16).
+            active: FaultFlags(src.u16() & src.u16() & src.u16()),
+            rearm_pending: src.bool(),
+            degraded: src.bool(),
+            clean_ticks: src.u16().checked_rem(p.window).unwrap_or(0),
+            window_pos: src.u16().checked_rem(p.window).unwrap_or(0),
+            window_strikes: src.u16(),
+            counters: Counters {
+                ticks: src.u32(),
+                valid_frames: src.u32(),
+                rejected,
+                missed_ticks: src.u32(),
+                hold_entries: src.u32(),
+                brake_entries: src.u32(),
+                rearms: src.u32(),
+                rearm_refused: src.u32(),
+            },
         }
     }
 }

@@ -3,13 +3,18 @@
 //! ```text
 //!  valid frame ─┐        watchdog tick (1 kHz)
 //!               v              v
-//!   fresh = true        missed = fresh ? 0 : missed + 1
+//!          age = 0         age = age + 1 (saturating), then the rung is chosen
 //!
-//!   missed:  0    1    2 ........ 5 .............. 10
-//!            NORMAL/REDUCED  HOLD   STOP           BRAKE (latched)
-//!                            │      │              │
-//!   setpoint: commanded ───  └─ hold decel ─ stop decel ─ PWM off, low-side short
+//!   last valid frame
+//!        │  tick1 tick2 ......... tick5 ............ tick10
+//!   age: 0    1     2               5                  10
+//!        NORMAL/REDUCED  HOLD      STOP               BRAKE (latched)
+//!                         │         │                  │
+//!   setpoint: commanded   └ hold decel ┴ stop decel ────┴ PWM off, low-side short
 //! ```
+//!
+//! `age` is the seed's watchdog counter turned around (seed: reload 10 on a valid frame, count down at
+//! 1 kHz, brake at 0): BRAKE comes at the 10th tick after the last valid frame, so at most 10 ms after it.
 //!
 //! Ticks are the only clock: [`Ladder::step`] never reads time, so every transition is a function
 //! of the event sequence and can be checked exhaustively (see `proofs/SAFETY.md`).
@@ -65,7 +70,7 @@ pub struct Counters {
     pub valid_frames: u32,
     /// Refused frames, indexed by [`RejectReason::index`].
     pub rejected: [u32; RejectReason::ALL.len()],
-    /// Ticks that found no fresh valid frame.
+    /// Ticks with no valid frame since the previous tick.
     pub missed_ticks: u32,
     /// Entries into HOLD.
     pub hold_entries: u32,
@@ -116,12 +121,8 @@ pub struct Ladder {
     /// so only an enable = 0 frame seen after the latch, then an enable = 1 frame, makes an edge: a host that
     /// keeps sending enable = 1 across an MCU reset or a link loss never restarts the drive by itself.
     pub(crate) prev_enable: bool,
-    /// A valid frame arrived since the last tick.
-    pub(crate) fresh: bool,
-    /// Consecutive ticks without a fresh valid frame (saturating).
-    pub(crate) missed: u16,
-    /// Ticks since the last valid frame (saturating), scaling the acceleration allowance.
-    pub(crate) since_valid: u16,
+    /// Watchdog ticks since the last valid frame (saturating); 0 right after a valid frame.
+    pub(crate) age: u16,
     pub(crate) brake_latched: bool,
     /// Why BRAKE latched (COMM_LOST, ESTOP, SHUTDOWN, conditions, POWER_ON).
     pub(crate) latch_causes: FaultFlags,
@@ -133,8 +134,8 @@ pub struct Ladder {
     pub(crate) clean_ticks: u16,
     /// Position in the reject-counting window, < window.
     pub(crate) window_pos: u16,
-    /// Rejects in the current window (saturating).
-    pub(crate) window_rejects: u16,
+    /// Strikes (refused frames, HOLD entries) in the current window (saturating).
+    pub(crate) window_strikes: u16,
     pub(crate) counters: Counters,
 }
 
@@ -179,9 +180,7 @@ impl Ladder {
             applied: [Speed::ZERO; 2],
             last: None,
             prev_enable: true,
-            fresh: false,
-            missed: 0,
-            since_valid: 0,
+            age: 0,
             brake_latched: true,
             latch_causes: FaultFlags::POWER_ON,
             active: FaultFlags::NONE,
@@ -189,7 +188,7 @@ impl Ladder {
             degraded: true,
             clean_ticks: 0,
             window_pos: 0,
-            window_rejects: 0,
+            window_strikes: 0,
             counters: Counters {
                 ticks: 0,
                 valid_frames: 0,
@@ -223,9 +222,9 @@ impl Ladder {
         self.last
     }
 
-    /// Consecutive ticks without a fresh valid frame.
-    pub const fn missed(&self) -> u16 {
-        self.missed
+    /// Watchdog ticks since the last valid frame.
+    pub const fn age(&self) -> u16 {
+        self.age
     }
 
     /// Event counters.
@@ -255,9 +254,9 @@ impl Ladder {
             }
         };
         let mode_ok = match self.mode {
-            Mode::Normal | Mode::Reduced => self.missed < p.hold_after,
-            Mode::Hold => self.missed >= p.hold_after && self.missed < p.stop_after,
-            Mode::Stop => self.missed < p.brake_after,
+            Mode::Normal | Mode::Reduced => self.age < p.hold_after,
+            Mode::Hold => self.age < p.stop_after,
+            Mode::Stop => self.age < p.brake_after,
             Mode::Brake => self.applied == [Speed::ZERO; 2],
         };
         applied_ok
@@ -265,7 +264,7 @@ impl Ladder {
             && mode_ok
             && (self.mode == Mode::Brake) == self.brake_latched
             && self.brake_latched != self.latch_causes.is_empty()
-            && (self.brake_latched || (self.missed < p.brake_after && self.last.is_some()))
+            && (self.brake_latched || (self.age < p.brake_after && self.last.is_some()))
             && (!self.active.intersects(LATCHING) || self.brake_latched)
             && (!self.rearm_pending || self.brake_latched)
             && self.window_pos < p.window
@@ -336,7 +335,7 @@ impl Ladder {
             drive,
             limit,
             faults,
-            missed: self.missed,
+            age: self.age,
         }
     }
 
@@ -369,9 +368,14 @@ impl Ladder {
         if let Some(c) = self.counters.rejected.get_mut(reason.index()) {
             *c = c.saturating_add(1);
         }
-        self.window_rejects = self.window_rejects.saturating_add(1);
-        // Degrade at the limit; once degraded, any reject restarts the clean window.
-        if self.degraded || self.window_rejects >= self.cfg.params().reject_limit {
+        self.strike();
+    }
+
+    /// A sign of a poor link (a refused frame, an entry into HOLD): degrade at the window's strike
+    /// limit; once degraded, any strike restarts the clean window.
+    fn strike(&mut self) {
+        self.window_strikes = self.window_strikes.saturating_add(1);
+        if self.degraded || self.window_strikes >= self.cfg.params().strike_limit {
             self.degraded = true;
             self.clean_ticks = 0;
         }
@@ -381,7 +385,7 @@ impl Ladder {
         let p = self.cfg.params();
         let allowance = p
             .max_cmd_step
-            .saturating_mul_int(i32::from(self.since_valid.max(1)));
+            .saturating_mul_int(i32::from(self.age.max(1)));
         match validate(cmd, self.last.as_ref(), allowance, &self.cfg) {
             Err(reason) => self.reject(reason),
             Ok(sp) => {
@@ -389,8 +393,7 @@ impl Ladder {
                 let rising = sp.enable && !self.prev_enable;
                 self.prev_enable = sp.enable;
                 self.last = Some(sp);
-                self.fresh = true;
-                self.since_valid = 0;
+                self.age = 0;
                 if rising {
                     self.request_rearm();
                 }
@@ -401,22 +404,19 @@ impl Ladder {
     fn tick(&mut self) {
         let p = *self.cfg.params();
         self.counters.ticks = self.counters.ticks.saturating_add(1);
-        if self.fresh {
-            self.missed = 0;
-            self.fresh = false;
-        } else {
-            self.missed = self.missed.saturating_add(1);
+        self.age = self.age.saturating_add(1);
+        let frame_since_last_tick = self.age == 1;
+        if !frame_since_last_tick {
             self.counters.missed_ticks = self.counters.missed_ticks.saturating_add(1);
         }
-        self.since_valid = self.since_valid.saturating_add(1);
 
         self.window_pos = self.window_pos.saturating_add(1);
         if self.window_pos >= p.window {
             self.window_pos = 0;
-            self.window_rejects = 0;
+            self.window_strikes = 0;
         }
 
-        if self.missed >= p.brake_after {
+        if self.age >= p.brake_after {
             self.latch(FaultFlags::COMM_LOST);
         }
 
@@ -424,7 +424,7 @@ impl Ladder {
         if self.brake_latched
             && self.rearm_pending
             && !self.active.intersects(LATCHING)
-            && self.missed == 0
+            && frame_since_last_tick
             && enabled
         {
             self.brake_latched = false;
@@ -435,12 +435,11 @@ impl Ladder {
             self.counters.rearms = self.counters.rearms.saturating_add(1);
         }
 
-        let link_late = self.missed >= p.hold_after;
         let mode = if self.brake_latched {
             Mode::Brake
-        } else if self.missed >= p.stop_after || !enabled {
+        } else if self.age >= p.stop_after || !enabled {
             Mode::Stop
-        } else if link_late {
+        } else if self.age >= p.hold_after {
             Mode::Hold
         } else if self.degraded || self.active.intersects(DEGRADING) {
             Mode::Reduced
@@ -450,9 +449,14 @@ impl Ladder {
 
         if mode == Mode::Hold && self.mode != Mode::Hold {
             self.counters.hold_entries = self.counters.hold_entries.saturating_add(1);
+            self.strike();
         }
-        if link_late || self.active.intersects(DEGRADING) {
+        if self.age >= p.stop_after || self.active.intersects(DEGRADING) {
+            // The link was lost long enough to stop, or a warning is active: REDUCED afterwards.
             self.degraded = true;
+            self.clean_ticks = 0;
+        } else if self.age >= p.hold_after {
+            // No recovery progress while frames are late.
             self.clean_ticks = 0;
         } else if self.degraded && mode != Mode::Brake {
             self.clean_ticks = self.clean_ticks.saturating_add(1);
@@ -551,24 +555,26 @@ mod tests {
 
     #[test]
     fn comm_loss_walks_the_ladder_at_the_seed_thresholds() {
+        // `cruising` ends with frame + tick: the first tick after the last valid frame has passed.
         let mut l = cruising(5.0);
-        // Seed 000: HOLD after 2 missed cycles, STOP at 5, BRAKE at 10 ms.
+        assert_eq!(l.age(), 1);
+        // Seed 000: HOLD after 2 missed cycles, BRAKE at 10 ms; STOP at the seed's WDG_HOLD_LEVEL (5).
+        // Index = ticks since the last valid frame, from the 2nd to the 10th.
         let expected = [
-            Mode::Normal,
-            Mode::Hold,
-            Mode::Hold,
-            Mode::Hold,
-            Mode::Stop,
-            Mode::Stop,
-            Mode::Stop,
-            Mode::Stop,
-            Mode::Stop,
-            Mode::Brake,
+            (2, Mode::Hold),
+            (3, Mode::Hold),
+            (4, Mode::Hold),
+            (5, Mode::Stop),
+            (6, Mode::Stop),
+            (7, Mode::Stop),
+            (8, Mode::Stop),
+            (9, Mode::Stop),
+            (10, Mode::Brake),
         ];
-        for (i, want) in expected.iter().enumerate() {
+        for (age, want) in expected {
             let out = l.step(Event::Tick);
-            assert_eq!(out.mode, *want, "tick {}", i + 1);
-            assert_eq!(out.missed as usize, i + 1);
+            assert_eq!(out.mode, want, "tick {age} after the last frame");
+            assert_eq!(out.age, age);
         }
         let out = l.output();
         assert_eq!(out.drive, Drive::Brake);
@@ -581,9 +587,7 @@ mod tests {
     fn hold_and_stop_decelerate_at_their_configured_rates() {
         let mut l = cruising(5.0);
         let v0 = l.applied()[0];
-        l.step(Event::Tick); // missed 1: NORMAL, still at speed
-        assert_eq!(l.applied()[0], v0);
-        l.step(Event::Tick); // missed 2: HOLD, one hold step
+        l.step(Event::Tick); // age 2: HOLD, one hold step
         assert_eq!(l.applied()[0], v0 - P.hold_decel_step);
         assert_eq!(
             l.applied()[1],
@@ -591,8 +595,8 @@ mod tests {
             "right wheel decelerates toward zero too"
         );
         l.step(Event::Tick);
-        l.step(Event::Tick);
-        l.step(Event::Tick); // missed 5: STOP
+        l.step(Event::Tick); // age 4: third hold step
+        l.step(Event::Tick); // age 5: STOP
         assert_eq!(
             l.applied()[0],
             v0 - P.hold_decel_step * 3 - P.stop_decel_step
@@ -600,11 +604,24 @@ mod tests {
     }
 
     #[test]
-    fn one_late_frame_is_not_a_hold() {
+    fn one_late_frame_is_one_hold_tick_and_no_degradation() {
         let mut l = cruising(3.0);
-        l.step(Event::Tick); // frame late by < 1 tick: one missed tick
+        // The frame due before this tick comes just after it (within the ±0.2 ms contract).
+        assert_eq!(l.step(Event::Tick).mode, Mode::Hold);
         l.step(cmd(3.0, true));
-        assert_eq!(l.step(Event::Tick).mode, Mode::Normal);
+        assert_eq!(
+            l.step(Event::Tick).mode,
+            Mode::Normal,
+            "one strike is below the limit"
+        );
+        // Three late frames within one window: the link is degraded.
+        for _ in 0..2 {
+            l.step(cmd(3.0, true));
+            l.step(Event::Tick);
+            l.step(Event::Tick);
+        }
+        l.step(cmd(3.0, true));
+        assert_eq!(l.step(Event::Tick).mode, Mode::Reduced);
     }
 
     #[test]
@@ -614,11 +631,13 @@ mod tests {
             l.step(Event::Tick);
         }
         assert_eq!(l.mode(), Mode::Stop);
-        let v = l.applied()[0].to_num::<f32>();
-        l.step(cmd(v, true));
+        let slowed = l.applied()[0];
+        // The host resumes with the command it was sending; the setpoint ramps back up from where STOP left it.
+        l.step(cmd(3.0, true));
         assert_eq!(l.step(Event::Tick).mode, Mode::Reduced);
+        assert_eq!(l.applied()[0], slowed + P.accel_step);
         for _ in 0..1000 {
-            l.step(cmd(v.min(10.0), true));
+            l.step(cmd(3.0, true));
             l.step(Event::Tick);
         }
         assert_eq!(l.mode(), Mode::Normal, "clean window restores NORMAL");

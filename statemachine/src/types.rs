@@ -226,9 +226,9 @@ pub enum Mode {
     Normal = 0,
     /// Link quality degraded or a warning active: commands limited to the reduced speed (≈ IEC 61800-5-2 SLS).
     Reduced = 1,
-    /// `hold_after` ticks missed: the last direction kept while decelerating gently (≈ SS2 onset).
+    /// `hold_after` ticks since the last valid frame: the last direction kept while decelerating gently (≈ SS2 onset).
     Hold = 2,
-    /// `stop_after` ticks missed, or drive disabled: zero target at the stop deceleration, speed loop active (≈ SS1).
+    /// `stop_after` ticks since the last valid frame, or drive disabled: zero target at the stop deceleration, speed loop active (≈ SS1).
     Stop = 3,
     /// PWM off and low-side short (dynamic brake), no speed loop; latched until an explicit re-arm (≈ STO, stop category 0).
     Brake = 4,
@@ -261,6 +261,6 @@ pub struct Output {
     pub limit: Speed,
     /// Fault and status flags for the feedback frame.
     pub faults: FaultFlags,
-    /// Consecutive watchdog ticks without a fresh valid frame (saturating).
-    pub missed: u16,
+    /// Watchdog ticks since the last valid frame (saturating).
+    pub age: u16,
 }
