@@ -281,6 +281,7 @@ impl Ladder {
                 let flag = condition.flag();
                 if active {
                     self.active = self.active.union(flag);
+                    // SR-6 / INV-7: a braking condition turns the PWM off in this very step.
                     if condition.brakes() {
                         self.latch(flag);
                     }
@@ -288,6 +289,7 @@ impl Ladder {
                     self.active = self.active.without(flag);
                 }
             }
+            // SR-9 / INV-6, INV-7: ESTOP latches at once; only `Release` clears the flag (INV-6).
             Event::Estop(Estop::Engage) => {
                 self.active = self.active.union(FaultFlags::ESTOP);
                 self.latch(FaultFlags::ESTOP);
@@ -295,6 +297,7 @@ impl Ladder {
             Event::Estop(Estop::Release) => {
                 self.active = self.active.without(FaultFlags::ESTOP);
             }
+            // SR-10 / INV-7: the host's shutdown bit turns the PWM off in this very step.
             Event::Shutdown(true) => {
                 self.active = self.active.union(FaultFlags::SHUTDOWN);
                 self.latch(FaultFlags::SHUTDOWN);
@@ -339,6 +342,7 @@ impl Ladder {
         }
     }
 
+    /// SR-1, SR-6, SR-9, SR-10: enter BRAKE, zero the setpoint, forget the command, withdraw any re-arm.
     fn latch(&mut self, cause: FaultFlags) {
         if !self.brake_latched {
             self.counters.brake_entries = self.counters.brake_entries.saturating_add(1);
@@ -352,6 +356,7 @@ impl Ladder {
         self.rearm_pending = false;
     }
 
+    /// SR-8 / INV-6: a re-arm is accepted only while no latching cause is active.
     fn request_rearm(&mut self) {
         if !self.brake_latched {
             return;
@@ -364,6 +369,7 @@ impl Ladder {
         }
     }
 
+    /// SR-2 / INV-4: a refused frame only counts; it never touches the command, the age or the setpoint.
     fn reject(&mut self, reason: RejectReason) {
         if let Some(c) = self.counters.rejected.get_mut(reason.index()) {
             *c = c.saturating_add(1);
@@ -381,6 +387,7 @@ impl Ladder {
         }
     }
 
+    /// SR-3, SR-4: validate, then (and only then) take the command and reset the age.
     fn frame(&mut self, cmd: &Command) {
         let p = self.cfg.params();
         let allowance = p
@@ -416,11 +423,13 @@ impl Ladder {
             self.window_strikes = 0;
         }
 
+        // SR-1 / INV-1: BRAKE at the brake_after-th tick (≤ 10) after the last valid frame.
         if self.age >= p.brake_after {
             self.latch(FaultFlags::COMM_LOST);
         }
 
         let enabled = matches!(self.last, Some(Setpoint { enable: true, .. }));
+        // SR-8 / INV-6: BRAKE is left only here: explicit re-arm + fresh valid frame + no active cause.
         if self.brake_latched
             && self.rearm_pending
             && !self.active.intersects(LATCHING)
@@ -435,6 +444,7 @@ impl Ladder {
             self.counters.rearms = self.counters.rearms.saturating_add(1);
         }
 
+        // SR-1, SR-7 / INV-2: the rung follows the age; a late link is never NORMAL or REDUCED.
         let mode = if self.brake_latched {
             Mode::Brake
         } else if self.age >= p.stop_after || !enabled {
@@ -467,6 +477,7 @@ impl Ladder {
         }
 
         self.mode = mode;
+        // SR-5 / INV-3, INV-8: the setpoint moves toward the rung's target by at most one step per tick.
         self.applied = match mode {
             Mode::Brake => [Speed::ZERO; 2],
             Mode::Stop => self

@@ -36,6 +36,8 @@ pub const fn seq_is_newer(seq: u32, prev: u32) -> bool {
     d != 0 && d <= 0x8000_0000
 }
 
+/// SR-4 / INV-5: NaN and infinities are refused before any comparison; the range check is done on the
+/// converted fixed-point value, so rounding cannot carry a value past v_max.
 fn to_speed(x: f32, cfg: &Config) -> Result<Speed, RejectReason> {
     if !x.is_finite() {
         return Err(RejectReason::NonFinite);
@@ -80,6 +82,7 @@ pub fn validate(
         }),
     ) = (cmd.seq, last)
     {
+        // SR-3: a repeated or older frame is refused.
         if !seq_is_newer(seq, *prev) {
             return Err(RejectReason::Stale);
         }
@@ -96,6 +99,7 @@ pub fn validate(
             && prev.drives()
             && !(within(left, prev.left, allowance) && within(right, prev.right, allowance))
         {
+            // SR-4: an impossible jump is refused (Incident-A: a corrupted frame that passes the CRC).
             return Err(RejectReason::Acceleration);
         }
     }
