@@ -236,7 +236,6 @@ pub enum Mode {
 
 /// What the bridge is told to do.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
-#[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub enum Drive {
     /// Speed loop active with these wheel setpoints (rad/s).
     Run {
@@ -251,7 +250,6 @@ pub enum Drive {
 
 /// What the ladder decided after one event: everything the firmware applies and reports.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
-#[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub struct Output {
     /// Current rung.
     pub mode: Mode,
@@ -263,4 +261,38 @@ pub struct Output {
     pub faults: FaultFlags,
     /// Watchdog ticks since the last valid frame (saturating).
     pub age: u16,
+}
+
+/// defmt renders speeds as raw Q16.16 bits (divide by 65536 for rad/s): `fixed` has no defmt support.
+#[cfg(feature = "defmt")]
+mod defmt_impls {
+    use super::{Drive, Output};
+
+    impl defmt::Format for Drive {
+        fn format(&self, f: defmt::Formatter) {
+            match self {
+                Drive::Run { left, right } => defmt::write!(
+                    f,
+                    "Run {{ left: {=i32}/65536, right: {=i32}/65536 }}",
+                    left.to_bits(),
+                    right.to_bits()
+                ),
+                Drive::Brake => defmt::write!(f, "Brake"),
+            }
+        }
+    }
+
+    impl defmt::Format for Output {
+        fn format(&self, f: defmt::Formatter) {
+            defmt::write!(
+                f,
+                "Output {{ mode: {}, drive: {}, limit: {=i32}/65536, faults: {=u16:#x}, age: {=u16} }}",
+                self.mode,
+                self.drive,
+                self.limit.to_bits(),
+                self.faults.0,
+                self.age
+            )
+        }
+    }
 }

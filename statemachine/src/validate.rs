@@ -8,7 +8,6 @@ use crate::types::{Command, ControlMode, RejectReason, Speed};
 
 /// A command that passed validation: finite, in range, a mode this firmware drives.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
-#[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub struct Setpoint {
     /// Left wheel target, |left| ≤ v_max.
     pub left: Speed,
