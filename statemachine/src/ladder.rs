@@ -468,7 +468,8 @@ impl Ladder {
         } else if self.age >= p.hold_after {
             // No recovery progress while frames are late.
             self.clean_ticks = 0;
-        } else if self.degraded && mode != Mode::Brake {
+        } else if self.degraded {
+            // (In BRAKE this count is moot: the re-arm that ends BRAKE restarts it.)
             self.clean_ticks = self.clean_ticks.saturating_add(1);
             if self.clean_ticks >= p.window {
                 self.degraded = false;
@@ -825,5 +826,183 @@ mod tests {
         );
         assert_eq!(clamp_sym(s(-30.0), s(20.0)), s(-20.0));
         assert_eq!(clamp_sym(s(3.0), s(20.0)), s(3.0));
+    }
+
+    #[test]
+    fn is_valid_refuses_each_broken_clause() {
+        let good = cruising(3.0);
+        assert!(good.is_valid());
+        let v = P.v_max;
+        let brake = {
+            let mut l = good;
+            l.step(Event::Estop(Estop::Engage));
+            l
+        };
+        assert!(brake.is_valid());
+        let broken: [(&str, fn(&mut Ladder)); 15] = [
+            ("applied beyond v_max", |l| {
+                l.applied[0] = P.v_max + Speed::from_bits(1)
+            }),
+            ("applied below -v_max", |l| {
+                l.applied[1] = -P.v_max - Speed::from_bits(1)
+            }),
+            ("last beyond v_max", |l| {
+                l.last = l.last.map(|s| Setpoint {
+                    right: P.v_max + Speed::from_bits(1),
+                    ..s
+                })
+            }),
+            ("last in position mode", |l| {
+                l.last = l.last.map(|s| Setpoint {
+                    mode: ControlMode::Position,
+                    ..s
+                })
+            }),
+            ("NORMAL with a late link", |l| l.age = P.hold_after),
+            ("HOLD at the stop age", |l| {
+                l.mode = Mode::Hold;
+                l.age = P.stop_after;
+            }),
+            ("STOP at the brake age", |l| {
+                l.mode = Mode::Stop;
+                l.age = P.brake_after;
+            }),
+            ("BRAKE without the latch", |l| {
+                l.mode = Mode::Brake;
+                l.applied = [Speed::ZERO; 2];
+            }),
+            ("latch without BRAKE", |l| {
+                l.brake_latched = true;
+                l.latch_causes = FaultFlags::ESTOP;
+            }),
+            ("running without a command", |l| l.last = None),
+            ("latching cause while running", |l| {
+                l.active = FaultFlags::UNDERVOLTAGE
+            }),
+            ("re-arm pending while running", |l| l.rearm_pending = true),
+            ("window position past the window", |l| {
+                l.window_pos = P.window
+            }),
+            ("clean count past the window", |l| l.clean_ticks = P.window),
+            ("age at the brake threshold while running", |l| {
+                l.mode = Mode::Stop;
+                l.age = P.brake_after;
+            }),
+        ];
+        for (what, breaks) in broken {
+            let mut l = good;
+            breaks(&mut l);
+            assert!(!l.is_valid(), "accepted: {what}");
+        }
+        let mut l = brake;
+        l.latch_causes = FaultFlags::NONE;
+        assert!(!l.is_valid(), "accepted: latched with no cause");
+        let mut l = brake;
+        l.applied = [v, Speed::ZERO];
+        assert!(!l.is_valid(), "accepted: BRAKE with a setpoint");
+    }
+
+    #[test]
+    fn every_latching_cause_blocks_rearm_and_warnings_do_not_latch() {
+        let latching: [Event; 6] = [
+            Event::Condition {
+                condition: Condition::Overcurrent,
+                active: true,
+            },
+            Event::Condition {
+                condition: Condition::Overtemperature,
+                active: true,
+            },
+            Event::Condition {
+                condition: Condition::EncoderFailure,
+                active: true,
+            },
+            Event::Condition {
+                condition: Condition::Undervoltage,
+                active: true,
+            },
+            Event::Estop(Estop::Engage),
+            Event::Shutdown(true),
+        ];
+        for e in latching {
+            let mut l = cruising(1.0);
+            assert_eq!(l.step(e).drive, Drive::Brake, "{e:?}");
+            l.step(Event::Rearm);
+            assert_eq!(l.counters().rearm_refused, 1, "{e:?}");
+        }
+        for c in [Condition::ThermalWarning, Condition::ClockSyncLost] {
+            let mut l = cruising(1.0);
+            l.step(Event::Condition {
+                condition: c,
+                active: true,
+            });
+            l.step(cmd(1.0, true));
+            assert_eq!(l.step(Event::Tick).mode, Mode::Reduced, "{c:?}");
+        }
+    }
+
+    #[test]
+    fn counters_count_what_they_say() {
+        let mut l = cruising(1.0);
+        let c0 = *l.counters();
+        l.step(Event::Rejected(RejectReason::Crc));
+        l.step(Event::Rejected(RejectReason::Parity));
+        l.step(Event::Rejected(RejectReason::Parity));
+        assert_eq!(l.counters().rejected_total(), c0.rejected_total() + 3);
+        assert_eq!(l.counters().rejected(RejectReason::Parity), 2);
+        // Two ticks with no frame between: two missed ticks.
+        l.step(Event::Tick);
+        l.step(Event::Tick);
+        assert_eq!(l.counters().missed_ticks, c0.missed_ticks + 2);
+        // One BRAKE episode with several causes counts once.
+        l.step(Event::Estop(Estop::Engage));
+        l.step(Event::Condition {
+            condition: Condition::Overcurrent,
+            active: true,
+        });
+        l.step(Event::Shutdown(true));
+        assert_eq!(l.counters().brake_entries, c0.brake_entries + 1);
+        assert_eq!(l.counters().hold_entries, c0.hold_entries + 1);
+    }
+
+    #[test]
+    fn idle_mode_targets_zero_whatever_speeds_it_carries() {
+        let mut l = cruising(2.0);
+        for _ in 0..100 {
+            l.step(Event::Frame(Command {
+                left: 2.0,
+                right: -2.0,
+                mode: 0,
+                enable: true,
+                seq: None,
+            }));
+            l.step(Event::Tick);
+        }
+        assert_eq!(l.applied(), [Speed::ZERO; 2]);
+        assert_eq!(l.mode(), Mode::Normal);
+    }
+
+    #[test]
+    fn max_tick_step_is_the_largest_of_the_three_steps() {
+        let s = |bits| Speed::from_bits(bits);
+        for (a, h, st, want) in [
+            (9, 5, 7, 9),
+            (5, 9, 7, 9),
+            (5, 7, 9, 9),
+            (9, 9, 9, 9),
+            (8, 9, 9, 9),
+        ] {
+            let p = ConfigParams {
+                accel_step: s(a),
+                hold_decel_step: s(h),
+                stop_decel_step: s(st),
+                ..P
+            };
+            assert_eq!(
+                Config::new(p).unwrap().max_tick_step(),
+                s(want),
+                "{a} {h} {st}"
+            );
+        }
     }
 }
