@@ -839,7 +839,8 @@ mod tests {
             l
         };
         assert!(brake.is_valid());
-        let broken: [(&str, fn(&mut Ladder)); 15] = [
+        type Breaker = (&'static str, fn(&mut Ladder));
+        let broken: [Breaker; 15] = [
             ("applied beyond v_max", |l| {
                 l.applied[0] = P.v_max + Speed::from_bits(1)
             }),
