@@ -296,3 +296,55 @@ mod defmt_impls {
         }
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn fault_flags_are_distinct_single_bits() {
+        let all = [
+            FaultFlags::OVERCURRENT,
+            FaultFlags::OVERTEMPERATURE,
+            FaultFlags::ENCODER,
+            FaultFlags::UNDERVOLTAGE,
+            FaultFlags::COMM_LOST,
+            FaultFlags::ESTOP,
+            FaultFlags::SHUTDOWN,
+            FaultFlags::THERMAL_WARNING,
+            FaultFlags::CLOCK_SYNC_LOST,
+            FaultFlags::BRAKE_LATCHED,
+            FaultFlags::POWER_ON,
+            FaultFlags::LINK_DEGRADED,
+        ];
+        let mut seen = 0u16;
+        for f in all {
+            assert_eq!(f.0.count_ones(), 1, "{f:?}");
+            assert_eq!(seen & f.0, 0, "{f:?} reused");
+            seen |= f.0;
+        }
+        assert_eq!(seen, 0x0FFF, "twelve flags in the low twelve bits");
+    }
+
+    #[test]
+    fn every_condition_has_its_own_flag_and_severity() {
+        let mut seen = FaultFlags::NONE;
+        for c in Condition::ALL {
+            assert!(!seen.intersects(c.flag()));
+            seen = seen.union(c.flag());
+        }
+        let braking: usize = Condition::ALL.iter().filter(|c| c.brakes()).count();
+        assert_eq!(braking, 4);
+        assert!(!Condition::ThermalWarning.brakes() && !Condition::ClockSyncLost.brakes());
+    }
+
+    #[test]
+    fn reject_reasons_index_their_counters() {
+        for (i, r) in RejectReason::ALL.iter().enumerate() {
+            assert_eq!(r.index(), i);
+            assert_eq!(*r as usize, i + 1, "wire codes are 1-based and dense");
+        }
+        assert_eq!(ControlMode::from_raw(1), Some(ControlMode::Speed));
+        assert_eq!(ControlMode::from_raw(4), None);
+    }
+}
