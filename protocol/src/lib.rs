@@ -33,7 +33,9 @@
 extern crate std;
 
 pub mod amr;
+pub mod cdc;
 pub mod crc16;
+mod le;
 mod pb;
 
 use statemachine::{Event, RejectReason};
