@@ -37,6 +37,7 @@ pub mod cdc;
 pub mod crc16;
 mod le;
 mod pb;
+pub mod pi_spi;
 
 use statemachine::{Event, RejectReason};
 
