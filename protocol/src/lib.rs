@@ -38,6 +38,7 @@ pub mod crc16;
 mod le;
 mod pb;
 pub mod pi_spi;
+pub mod teensy;
 
 use statemachine::{Event, RejectReason};
 

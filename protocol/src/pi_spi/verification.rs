@@ -104,8 +104,10 @@ pub(crate) fn check_round_trip(src: &mut impl Source) {
     }
     assert!(b == again);
     assert!(parity_ok(u32::from_le_bytes([b[1], b[2], b[3], b[4]])));
-    let mut tx = TxBuffer::default();
-    tx.update_time = src.u32();
+    let mut tx = TxBuffer {
+        update_time: src.u32(),
+        ..Default::default()
+    };
     tx.motor.bemf[0] = src.i32();
     tx.imu.gyro.accuracy = src.u8() as i8;
     tx.imu.heading = src.f32();
