@@ -15,7 +15,6 @@ use statemachine::{Drive, Speed};
 /// reverse swaps them. At most one of `a`, `b` is non-zero, so the bridge never shorts the supply
 /// through both high sides, and zero duty is both low sides on (a dynamic brake at rest).
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
-#[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub struct BridgeCompare {
     /// Half-bridge A compare value.
     pub a: u16,
@@ -90,7 +89,6 @@ pub const SPEED_WINDOW: usize = 16;
 /// At 10 kHz with a 4096-count/rev encoder the resolution is 2π / (4096 · 1.6 ms) ≈ 0.96 rad/s and
 /// the group delay 0.8 ms.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
-#[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub struct SpeedEstimator {
     ring: [u16; SPEED_WINDOW],
     pos: usize,
@@ -156,7 +154,6 @@ pub fn speed_plausible(speed: Speed, v_max: Speed) -> bool {
 
 /// Everything one wheel's cascade needs besides the measurements.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
-#[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub struct AxisParams {
     /// Speed controller gains (output limit = current limit, A).
     pub speed: PidGains,
@@ -170,7 +167,6 @@ pub struct AxisParams {
 
 /// One wheel's cascade: rate limiter → speed PID → current PI, with its speed estimator.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
-#[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub struct AxisLoop {
     limiter: RateLimiter,
     speed_pid: SpeedPid,
@@ -324,7 +320,6 @@ pub const fn iwdg_timeout_us(code: u8, reload: u16, lsi_hz: u32) -> u64 {
 /// least `min_runs` times since the previous feed; a stalled control loop therefore stops the
 /// feeding and the IWDG resets the MCU into its safe (braked) reset state.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
-#[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub struct Liveness<const N: usize> {
     seen: [u32; N],
 }

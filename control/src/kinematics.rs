@@ -17,7 +17,6 @@ const MIN_BASE: Q = Q::lit("0.01");
 
 /// Body velocity: forward speed and yaw rate.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
-#[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub struct Twist {
     /// Forward speed, m/s.
     pub v: MetersPerSecond,
@@ -38,7 +37,6 @@ pub enum KinematicsError {
 
 /// A validated differential-drive geometry.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
-#[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub struct DiffDrive {
     wheelbase: Meters,
     radius: Meters,

@@ -30,7 +30,6 @@ pub enum AntiWindup {
 
 /// Gains and limits of one controller, per sample.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
-#[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub struct PidGains {
     /// Proportional gain (output units per input unit).
     pub kp: Gain,
@@ -56,7 +55,6 @@ impl PidGains {
 
 /// The controller state: gains, integrator and the previous measurement.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
-#[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub struct Pid {
     gains: PidGains,
     integ: Q,
@@ -144,7 +142,6 @@ impl Pid {
 
 /// Wheel speed controller: speed error (rad/s) in, motor current reference (A) out, run at 10 kHz.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
-#[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub struct SpeedPid(Pid);
 
 impl SpeedPid {
@@ -168,7 +165,6 @@ impl SpeedPid {
 
 /// Motor current controller: current error (A) in, PWM duty out, run at 20 kHz in step with the PWM.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
-#[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub struct CurrentPi(Pid);
 
 impl CurrentPi {

@@ -7,7 +7,6 @@ use crate::Q;
 
 /// A slew-rate limiter with a symmetric step.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
-#[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub struct RateLimiter {
     max_step: Q,
     value: Q,
