@@ -289,12 +289,21 @@ impl Encoders {
     }
 
     /// Raw counter values [left, right].
+    #[cfg(not(feature = "qemu"))]
     pub fn read(&self) -> [u16; 2] {
         // The counters are 16-bit: the upper half of CNT reads as zero.
         [
             (self.tim3.cnt().read().bits() & 0xFFFF) as u16,
             (self.tim4.cnt().read().bits() & 0xFFFF) as u16,
         ]
+    }
+
+    /// Under the emulator the wheels stand still: QEMU models TIM3/TIM4 as free-running
+    /// counters without encoder inputs, which would read as an implausible speed.
+    #[cfg(feature = "qemu")]
+    pub fn read(&self) -> [u16; 2] {
+        let _ = (&self.tim3, &self.tim4);
+        [0, 0]
     }
 }
 
@@ -320,11 +329,19 @@ impl CurrentSense {
     }
 
     /// Reads the two injected results [left, right] and clears the end-of-conversion flag.
+    #[cfg(not(feature = "qemu"))]
     pub fn read(&self) -> [u16; 2] {
         let l = (self.adc.jdr1().read().bits() & 0x0FFF) as u16;
         let r = (self.adc.jdr2().read().bits() & 0x0FFF) as u16;
         rmw(self.adc.sr(), (1 << 2) | (1 << 3), 0); // JEOC, JSTRT
         [l, r]
+    }
+
+    /// The emulator's ADC converts nothing useful: report mid-scale (zero current).
+    #[cfg(feature = "qemu")]
+    pub fn read(&self) -> [u16; 2] {
+        let _ = &self.adc;
+        [2048, 2048]
     }
 }
 

@@ -29,7 +29,7 @@ mod imp {
     use statemachine::{Drive, Ladder, Output};
 
     /// Ticks to keep tracing after the file ended and BRAKE latched, before exiting QEMU.
-    const TAIL_TICKS: u32 = 5;
+    const TAIL_TICKS: u32 = 15;
 
     /// The open frame file.
     pub struct Emu {
