@@ -9,6 +9,9 @@
 
 use protocol::amr::{self, MotorCommand, MotorFeedback, FRAME_LEN};
 use std::collections::HashMap;
+
+#[path = "../tests/common/structs.rs"]
+mod structs;
 use std::fmt::Write as _;
 
 fn kv(line: &str) -> (&str, HashMap<&str, i64>) {
@@ -76,5 +79,10 @@ fn main() {
     let dir = std::path::Path::new(&dir);
     let cases = include_str!("../golden/amr_cases.txt");
     std::fs::write(dir.join("amr_rust.txt"), amr_frames(cases)).unwrap();
+    let mut out = String::new();
+    for c in structs::parse(include_str!("../golden/structs_python.txt")) {
+        writeln!(out, "{} {}", c.kind, hex(&structs::encode(&c))).unwrap();
+    }
+    std::fs::write(dir.join("structs_rust.txt"), out).unwrap();
     println!("golden_emit: wrote Rust frames to {}", dir.display());
 }
