@@ -93,7 +93,9 @@ pub struct Inputs {
     pub speeds: [Speed; 2],
 }
 
-/// One link transaction: decode and hand the result to the ladder.
+/// One link transaction: decode and hand the result to the ladder. Not inlined, so the budget
+/// report can count its instructions as one unit (CRC + decode + validate + ladder step).
+#[inline(never)]
 pub fn on_frame(ladder: &mut Ladder, frame: &[u8; FRAME_LEN]) -> Output {
     let event = match decode_command(frame) {
         Ok(cmd) => Event::Frame(cmd.to_command()),
@@ -103,6 +105,7 @@ pub fn on_frame(ladder: &mut Ladder, frame: &[u8; FRAME_LEN]) -> Output {
 }
 
 /// One watchdog tick: board conditions as level events, then the tick itself.
+#[inline(never)]
 pub fn on_tick(ladder: &mut Ladder, inputs: &Inputs) -> Output {
     let v_max = ladder.config().params().v_max;
     let encoder_bad = inputs.speeds.iter().any(|s| !speed_plausible(*s, v_max));
@@ -118,6 +121,7 @@ pub fn on_tick(ladder: &mut Ladder, inputs: &Inputs) -> Output {
 }
 
 /// Builds the feedback frame for the next transaction.
+#[inline(never)]
 pub fn feedback(
     m: &Measurements,
     out: &Output,
