@@ -14,7 +14,8 @@ pub const MAX_WINDOW: u16 = 60_000;
 /// Raw configuration values before validation; [`Config::new`] checks them.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct ConfigParams {
-    /// Ticks since the last valid frame before HOLD (seed: "2 missed cycles").
+    /// Ticks since the last valid frame before HOLD. Seed: "2 missed cycles"; with a frame every tick the age
+    /// is 1 at each tick, so two missed frames make age 3.
     pub hold_after: u16,
     /// Ticks since the last valid frame before STOP.
     pub stop_after: u16,
@@ -39,10 +40,10 @@ pub struct ConfigParams {
 }
 
 impl ConfigParams {
-    /// The seed's figures: HOLD 2 ticks after the last valid frame, STOP at 5, BRAKE at 10; 20 rad/s, half in REDUCED;
+    /// The seed's figures: HOLD after 2 missed cycles (age 3), STOP at 5, BRAKE at 10; 20 rad/s, half in REDUCED;
     /// 50 rad/s² command acceleration, 100 rad/s² STOP deceleration; 3 strikes per 1 s window.
     pub const DEFAULT: Self = Self {
-        hold_after: 2,
+        hold_after: 3,
         stop_after: 5,
         brake_after: 10,
         v_max: Speed::const_from_int(20),
@@ -164,7 +165,7 @@ mod tests {
     #[test]
     fn default_is_the_seed() {
         let p = Config::DEFAULT.params();
-        assert_eq!((p.hold_after, p.stop_after, p.brake_after), (2, 5, 10));
+        assert_eq!((p.hold_after, p.stop_after, p.brake_after), (3, 5, 10));
         assert_eq!(p.reduced_limit * 2, p.v_max);
     }
 
@@ -177,7 +178,7 @@ mod tests {
                 ConfigError::ThresholdOrder,
             ),
             (
-                ConfigParams { stop_after: 2, ..d },
+                ConfigParams { stop_after: 3, ..d },
                 ConfigError::ThresholdOrder,
             ),
             (

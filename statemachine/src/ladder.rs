@@ -6,11 +6,14 @@
 //!          age = 0         age = age + 1 (saturating), then the rung is chosen
 //!
 //!   last valid frame
-//!        │  tick1 tick2 ......... tick5 ............ tick10
-//!   age: 0    1     2               5                  10
-//!        NORMAL/REDUCED  HOLD      STOP               BRAKE (latched)
-//!                         │         │                  │
-//!   setpoint: commanded   └ hold decel ┴ stop decel ────┴ PWM off, low-side short
+//!        │  tick1 tick2 tick3 ..... tick5 ............ tick10
+//!   age: 0    1     2     3           5                  10
+//!        NORMAL/REDUCED   HOLD        STOP               BRAKE (latched)
+//!                          │           │                  │
+//!   setpoint: commanded    └ hold decel ┴ stop decel ─────┴ PWM off, low-side short
+//!
+//!   With a frame every millisecond the age is 1 at every tick; one lost frame makes it 2 (no effect),
+//!   two missed cycles make it 3 (HOLD, seed: "2 missed cycles").
 //! ```
 //!
 //! `age` is the seed's watchdog counter turned around (seed: reload 10 on a valid frame, count down at
@@ -570,10 +573,10 @@ mod tests {
         // `cruising` ends with frame + tick: the first tick after the last valid frame has passed.
         let mut l = cruising(5.0);
         assert_eq!(l.age(), 1);
-        // Seed 000: HOLD after 2 missed cycles, BRAKE at 10 ms; STOP at the seed's WDG_HOLD_LEVEL (5).
-        // Index = ticks since the last valid frame, from the 2nd to the 10th.
+        // Seed 000: HOLD after 2 missed cycles (age 3), BRAKE at 10 ms (age 10); STOP at the seed's
+        // WDG_HOLD_LEVEL (5). Index = ticks since the last valid frame, from the 2nd to the 10th.
         let expected = [
-            (2, Mode::Hold),
+            (2, Mode::Normal),
             (3, Mode::Hold),
             (4, Mode::Hold),
             (5, Mode::Stop),
@@ -599,26 +602,32 @@ mod tests {
     fn hold_and_stop_decelerate_at_their_configured_rates() {
         let mut l = cruising(5.0);
         let v0 = l.applied()[0];
-        l.step(Event::Tick); // age 2: HOLD, one hold step
+        l.step(Event::Tick); // age 2: one frame lost, nothing changes
+        assert_eq!(l.applied()[0], v0);
+        l.step(Event::Tick); // age 3: HOLD, one hold step
         assert_eq!(l.applied()[0], v0 - P.hold_decel_step);
         assert_eq!(
             l.applied()[1],
             -(v0 - P.hold_decel_step),
             "right wheel decelerates toward zero too"
         );
-        l.step(Event::Tick);
-        l.step(Event::Tick); // age 4: third hold step
+        l.step(Event::Tick); // age 4: second hold step
         l.step(Event::Tick); // age 5: STOP
         assert_eq!(
             l.applied()[0],
-            v0 - P.hold_decel_step * 3 - P.stop_decel_step
+            v0 - P.hold_decel_step * 2 - P.stop_decel_step
         );
     }
 
     #[test]
-    fn one_late_frame_is_one_hold_tick_and_no_degradation() {
+    fn one_lost_frame_changes_nothing_and_repeated_holds_degrade() {
         let mut l = cruising(3.0);
-        // The frame due before this tick comes just after it (within the ±0.2 ms contract).
+        // One frame lost (or late past the tick, within the ±0.2 ms contract): no HOLD, no strike.
+        assert_eq!(l.step(Event::Tick).mode, Mode::Normal);
+        l.step(cmd(3.0, true));
+        assert_eq!(l.step(Event::Tick).mode, Mode::Normal);
+        // Two missed cycles: one HOLD tick, one strike; NORMAL again when frames return.
+        l.step(Event::Tick);
         assert_eq!(l.step(Event::Tick).mode, Mode::Hold);
         l.step(cmd(3.0, true));
         assert_eq!(
@@ -626,14 +635,14 @@ mod tests {
             Mode::Normal,
             "one strike is below the limit"
         );
-        // Three late frames within one window: the link is degraded.
+        // Three HOLD episodes within one window: the link is degraded.
         for _ in 0..2 {
+            l.step(Event::Tick);
+            l.step(Event::Tick);
             l.step(cmd(3.0, true));
             l.step(Event::Tick);
-            l.step(Event::Tick);
         }
-        l.step(cmd(3.0, true));
-        assert_eq!(l.step(Event::Tick).mode, Mode::Reduced);
+        assert_eq!(l.mode(), Mode::Reduced);
     }
 
     #[test]

@@ -1,0 +1,81 @@
+#!/usr/bin/env python3
+"""Turns the size listing and the instruction counts into firmware/BUDGET.md."""
+import json
+import sys
+
+F_CPU = 168e6
+RATES = {"current_loop handler (ADC)": 20_000, "speed_pid handler (TIM5)": 10_000}
+# Cycles per instruction assumed for the load estimate: Cortex-M4 executes most instructions in
+# one cycle; loads/stores, branches and multiplies take 2-3, flash wait states (5 at 168 MHz) are
+# mostly hidden by the ART accelerator. 2.0 is a deliberately pessimistic average.
+CPI = 2.0
+
+
+def sizes(path):
+    sec = {}
+    for line in open(path):
+        parts = line.split()
+        if len(parts) >= 3 and parts[0].startswith("."):
+            sec[parts[0]] = int(parts[1])
+    flash = sum(sec.get(s, 0) for s in (".vector_table", ".text", ".rodata", ".data"))
+    ram = sum(sec.get(s, 0) for s in (".data", ".bss", ".uninit"))
+    return sec, flash, ram
+
+
+def main(size_path, counts_path):
+    sec, flash, ram = sizes(size_path)
+    counts = json.load(open(counts_path))
+    out = []
+    out.append("# Firmware budgets\n")
+    out.append("Regenerate with `bash firmware/budget/run.sh` (board build sizes; instruction counts of the")
+    out.append("`qemu` build's Cortex-M4 code under QEMU netduinoplus2, single-stepped by gdb).\n")
+    out.append("## Memory (board build, `cargo fw`)\n")
+    out.append("| section | bytes |\n|---|---|")
+    for s in (".vector_table", ".text", ".rodata", ".data", ".bss", ".uninit"):
+        if s in sec:
+            out.append(f"| {s} | {sec[s]} |")
+    out.append(f"| **flash** (vector table + text + rodata + data) | **{flash}** of 1 048 576 ({100*flash/1048576:.1f} %) |")
+    out.append(f"| **static RAM** (data + bss + uninit: the defmt RTT buffer) | **{ram}** of 131 072 ({100*ram/131072:.1f} %) |")
+    out.append("\nThe stack is the rest of RAM below the statics (flip-link), far above the measured use below.\n")
+    out.append("## Executed instructions (min / max over the sampled calls)\n")
+    out.append("| unit | instructions | own stack, bytes |\n|---|---|---|")
+    mx = {}
+    for name, r in counts.items():
+        ins = r["instructions"]
+        st = r["stack_bytes"]
+        mx[name] = max(ins)
+        out.append(f"| {name} | {min(ins)} / {max(ins)} | {max(st)} |")
+    frame = mx.get("frame: on_frame (CRC + decode + validate + ladder step)", 0)
+    fb = mx.get("frame: feedback (encode feedback frame)", 0)
+    tick = mx.get("tick: on_tick (conditions + ladder step)", 0)
+    out.append("")
+    out.append(f"Per received frame (CRC + decode + validate + ladder step): **{frame} instructions** "
+               f"(target < 1000; seed budget 3360 cycles = 20 µs). With the feedback frame: {frame + fb}.")
+    out.append("")
+    out.append("## CPU load at 168 MHz\n")
+    out.append(f"Assuming {CPI} cycles per instruction on average (pessimistic for this code):\n")
+    out.append("| load | rate, Hz | instructions | cycles/s | share |\n|---|---|---|---|---|")
+    total = 0.0
+    rows = [("current_loop", 20_000, mx.get("current_loop handler (ADC)", 0)),
+            ("speed_pid", 10_000, mx.get("speed_pid handler (TIM5)", 0)),
+            ("watchdog_tick (on_tick + apply, ≈ on_tick + 100)", 1_000, tick + 100),
+            ("spi_dma_done (on_frame + feedback + copy, ≈ + 100)", 1_000, frame + fb + 100)]
+    for name, rate, n in rows:
+        c = rate * n * CPI
+        total += c
+        out.append(f"| {name} | {rate} | {n} | {c:,.0f} | {100*c/F_CPU:.1f} % |")
+    out.append(f"| **total** | | | {total:,.0f} | **{100*total/F_CPU:.1f} %** |")
+    out.append("")
+    out.append("Notes: the `qemu` build reads constant ADC and encoder values (QEMU models neither), so its")
+    out.append("control handlers skip a few register reads the board build does; the handler counts include")
+    out.append("RTIC's lock code and the exception return. `watchdog_tick` and `spi_dma_done` handlers are")
+    out.append("estimated from their pure parts plus a margin because the emulator build adds semihosting")
+    out.append("I/O to them. Stack figures are the deepest SP seen below the entry SP during the sampled calls")
+    out.append("(measured, not a call-graph bound; the hardware exception frame of 32 bytes, 104 with FPU")
+    out.append("context, comes on top per preemption level). Worst case nested: the four levels together")
+    out.append("stay within the sum of the per-unit figures plus 4 × 104 bytes.")
+    print("\n".join(out))
+
+
+if __name__ == "__main__":
+    main(sys.argv[1], sys.argv[2])

@@ -1,0 +1,27 @@
+#!/usr/bin/env bash
+# Regenerates firmware/BUDGET.md: flash/RAM of the board build, executed instructions per frame and
+# per control-loop iteration (Cortex-M4 code under QEMU, counted by gdb single-stepping), stack use
+# per unit, and the resulting CPU load at 168 MHz. A report, not a test: it takes a few minutes.
+# Needs qemu-system-arm, gdb-multiarch, binutils-arm-none-eabi (Debian packages) and python3.
+set -euo pipefail
+cd "$(dirname "$0")/../.."
+cargo fw
+cargo build -p firmware --release --target thumbv7em-none-eabihf --features qemu --target-dir target/qemu
+board="$PWD/target/thumbv7em-none-eabihf/release/firmware"
+emu="$PWD/target/qemu/thumbv7em-none-eabihf/release/firmware"
+work="$(mktemp -d)"
+qpid=""
+cleanup() { [ -n "$qpid" ] && kill "$qpid" 2>/dev/null; rm -rf "$work"; }
+trap cleanup EXIT
+python3 firmware/qemu/make_frames.py "$work/frames.bin"
+port=$((20000 + RANDOM % 20000))
+(cd "$work" && exec qemu-system-arm -machine netduinoplus2 -cpu cortex-m4 -nographic -monitor none \
+  -serial none -semihosting-config enable=on,target=native -S -gdb "tcp::$port" -kernel "$emu" \
+  > "$work/qemu.log" 2>&1) &
+qpid=$!
+sleep 1
+GDB_PORT=$port BUDGET_JSON="$work/counts.json" BUDGET_SAMPLES=3 \
+  timeout 1200 gdb-multiarch -batch -x firmware/budget/count.py "$emu" > "$work/gdb.log" 2>&1 || true
+arm-none-eabi-size -A "$board" > "$work/size.txt"
+python3 firmware/budget/report.py "$work/size.txt" "$work/counts.json" > firmware/BUDGET.md
+echo "wrote firmware/BUDGET.md"
