@@ -1,0 +1,320 @@
+//! Kani harnesses for the control crate, each with a `cargo test` twin driving the same body.
+//!
+//! Properties: PID and PI outputs and integrators stay within their bounds for every state that
+//! satisfies the invariant and every input (an inductive argument: one step from any valid state);
+//! the rate limiter never moves more than its step and never overshoots; kinematics, ADC scaling,
+//! bridge mapping and speed estimation never panic or overflow, and the bridge never drives both
+//! high sides.
+
+use crate::glue::{adc_to_amps, bridge_compare, AxisLoop, AxisParams, Liveness, SpeedEstimator};
+use crate::kinematics::{DiffDrive, Twist};
+use crate::pid::{AntiWindup, CurrentPi, Pid, PidGains};
+use crate::rate::RateLimiter;
+use crate::{within, Q};
+use statemachine::harness::Source;
+use statemachine::{assume, cover};
+
+fn q(src: &mut impl Source) -> Q {
+    Q::from_bits(src.i32())
+}
+
+fn gains(src: &mut impl Source) -> PidGains {
+    PidGains {
+        kp: q(src),
+        ki_dt: q(src),
+        kd_dt: q(src),
+        out_limit: q(src),
+        i_limit: q(src),
+        anti_windup: if src.bool() {
+            AntiWindup::Conditional
+        } else {
+            AntiWindup::ClampOnly
+        },
+    }
+}
+
+/// PID: from any valid state, one step keeps |u| ≤ out_limit and |i| ≤ i_limit.
+pub fn pid_bounded(src: &mut impl Source) {
+    let g = gains(src);
+    assume!(src, g.is_valid());
+    let integ = q(src);
+    assume!(src, within(integ, g.i_limit));
+    let prev = q(src);
+    let mut pid = Pid::from_parts(g, integ, prev);
+    let (r, y) = (q(src), q(src));
+    let u = pid.step(r, y);
+    assert!(within(u, g.out_limit));
+    assert!(pid.is_valid());
+    cover!(
+        src,
+        u == g.out_limit && u > Q::ZERO,
+        "output saturated high"
+    );
+    cover!(
+        src,
+        u == g.out_limit.saturating_neg() && u < Q::ZERO,
+        "output saturated low"
+    );
+    cover!(
+        src,
+        g.anti_windup == AntiWindup::Conditional
+            && pid.integrator() == integ
+            && g.ki_dt != Q::ZERO
+            && r != y,
+        "anti-windup held the integrator"
+    );
+    cover!(
+        src,
+        pid.integrator() == g.i_limit && g.i_limit > Q::ZERO,
+        "integrator at its limit"
+    );
+}
+
+/// Current PI: |duty| ≤ min(out_limit, 1) from any valid state.
+pub fn current_pi_bounded(src: &mut impl Source) {
+    let g = gains(src);
+    assume!(src, g.is_valid());
+    let mut pi = CurrentPi::new(g);
+    let (r, y) = (q(src), q(src));
+    let d1 = pi.step(r, y);
+    let d2 = pi.step(q(src), q(src));
+    let lim = pi.inner().gains().out_limit;
+    assert!(lim <= Q::ONE);
+    assert!(within(d1, lim) && within(d2, lim));
+    assert!(pi.inner().is_valid());
+    cover!(src, d2 == Q::ONE, "full positive duty");
+    cover!(src, d2 > Q::ZERO && d2 < lim, "unsaturated duty");
+}
+
+/// Rate limiter: |Δ| ≤ max_step, never past the target, exact when within one step.
+pub fn rate_limiter_bounded(src: &mut impl Source) {
+    let step = q(src);
+    let start = q(src);
+    let mut r = RateLimiter::new(step, start);
+    let target = q(src);
+    let next = r.step(target);
+    let d = i64::from(next.to_bits()).wrapping_sub(i64::from(start.to_bits()));
+    let lim = i64::from(r.max_step().to_bits());
+    assert!(d <= lim && d >= lim.wrapping_neg());
+    let (lo, hi) = if start <= target {
+        (start, target)
+    } else {
+        (target, start)
+    };
+    assert!(next >= lo && next <= hi);
+    let gap = i64::from(target.to_bits()).wrapping_sub(i64::from(start.to_bits()));
+    if gap.unsigned_abs() <= lim.unsigned_abs() {
+        assert_eq!(next, target);
+    }
+    cover!(src, next == target && start != target, "reached the target");
+    cover!(src, next != target, "limited by the step");
+}
+
+/// Kinematics: construction refuses bad geometry; conversions never panic; zero maps to zero and
+/// a straight twist gives equal wheel speeds.
+pub fn kinematics_total(src: &mut impl Source) {
+    // Geometry drawn from [0, 128) m and [0, 16) m: covers every refusal below the minimum and
+    // every accepted radius; bases above 128 m are refused by the same comparison.
+    let base = Q::from_bits((src.u32() & 0x007F_FFFF) as i32);
+    let radius = Q::from_bits((src.u32() & 0x000F_FFFF) as i32);
+    let k = DiffDrive::new(base, radius);
+    cover!(src, k.is_err(), "geometry refused");
+    let Ok(k) = k else {
+        return;
+    };
+    assert!(radius > Q::ZERO && base > Q::ZERO);
+    let t = Twist {
+        v: q(src),
+        omega: q(src),
+    };
+    let [l, r] = k.inverse(t);
+    let back = k.forward(l, r);
+    let _ = back;
+    assert_eq!(
+        k.inverse(Twist {
+            v: Q::ZERO,
+            omega: Q::ZERO
+        }),
+        [Q::ZERO; 2]
+    );
+    let [sl, sr] = k.inverse(Twist {
+        v: t.v,
+        omega: Q::ZERO,
+    });
+    assert_eq!(sl, sr);
+    let z = k.forward(l, l);
+    assert_eq!(z.omega, Q::ZERO);
+    cover!(src, l != r, "turning twist");
+}
+
+/// Bridge mapping: both compares ≤ ARR and at most one non-zero (never both high sides on).
+pub fn bridge_compare_safe(src: &mut impl Source) {
+    let duty = q(src);
+    let arr = src.u16();
+    let c = bridge_compare(duty, arr);
+    assert!(c.a <= arr && c.b <= arr);
+    assert!(c.a == 0 || c.b == 0);
+    if duty > Q::ZERO {
+        assert_eq!(c.b, 0);
+    }
+    if duty < Q::ZERO {
+        assert_eq!(c.a, 0);
+    }
+    cover!(src, c.a == arr && arr > 0, "full forward");
+    cover!(src, c.b > 0, "reverse");
+}
+
+/// ADC scaling never panics and |i| ≤ 4095·|gain| (saturating at the Q16.16 range).
+pub fn adc_scaling_bounded(src: &mut impl Source) {
+    let counts = src.u16();
+    let offset = src.u16();
+    let gain = q(src);
+    assume!(
+        src,
+        gain.unsigned_abs() <= fixed::types::U16F16::from_num(8)
+    );
+    let i = adc_to_amps(counts, offset, gain);
+    let bound = gain.unsigned_abs().saturating_mul_int(4095);
+    assert!(i.unsigned_abs() <= bound);
+    cover!(src, i > Q::ZERO, "positive current");
+    cover!(src, i < Q::ZERO, "negative current");
+}
+
+/// Speed estimator: any counter sequence, no panic, estimate = scale × window delta.
+pub fn speed_estimator_total(src: &mut impl Source) {
+    let scale = q(src);
+    let mut e = SpeedEstimator::new(src.u16(), scale);
+    for _ in 0..3 {
+        let s = e.update(src.u16());
+        assert!(s.unsigned_abs() <= scale.unsigned_abs().saturating_mul_int(32_768));
+    }
+    cover!(src, e.total() != 0, "wheel moved");
+}
+
+/// Whole cascade: current reference and duty stay within the configured limits for any inputs.
+pub fn axis_bounded(src: &mut impl Source) {
+    let p = AxisParams {
+        speed: gains(src),
+        current: gains(src),
+        ref_step: q(src),
+        speed_scale: q(src),
+    };
+    assume!(src, p.speed.is_valid() && p.current.is_valid());
+    let mut a = AxisLoop::new(&p, src.u16());
+    let sp = if src.bool() { Some(q(src)) } else { None };
+    let i_ref = a.speed_step(sp, src.u16());
+    let d = a.current_step(q(src));
+    assert!(within(i_ref, p.speed.out_limit));
+    assert!(within(d, Q::ONE) && within(d, p.current.out_limit));
+    if sp.is_none() {
+        assert_eq!(i_ref, Q::ZERO);
+    }
+    cover!(src, i_ref != Q::ZERO, "current demanded");
+}
+
+/// The liveness monitor never panics and fails when a task did not run.
+pub fn liveness_total(src: &mut impl Source) {
+    let mut l = Liveness::<2>::new();
+    let _ = l.check([src.u32(), src.u32()], [src.u32(), src.u32()]);
+    let a = src.u32();
+    let b = src.u32();
+    let first = l.check([a, b], [1, 1]);
+    let second = l.check([a, b], [1, 1]);
+    assert!(!second);
+    cover!(src, first, "both tasks ran");
+}
+
+#[cfg(kani)]
+mod proofs {
+    use statemachine::harness::KaniSource;
+
+    #[kani::proof]
+    #[kani::unwind(2)]
+    fn verify_pid_bounded() {
+        super::pid_bounded(&mut KaniSource);
+    }
+    #[kani::proof]
+    #[kani::unwind(2)]
+    fn verify_current_pi_bounded() {
+        super::current_pi_bounded(&mut KaniSource);
+    }
+    #[kani::proof]
+    #[kani::unwind(2)]
+    fn verify_rate_limiter_bounded() {
+        super::rate_limiter_bounded(&mut KaniSource);
+    }
+    #[kani::proof]
+    #[kani::unwind(2)]
+    fn verify_kinematics_total() {
+        super::kinematics_total(&mut KaniSource);
+    }
+    #[kani::proof]
+    #[kani::unwind(2)]
+    fn verify_bridge_compare_safe() {
+        super::bridge_compare_safe(&mut KaniSource);
+    }
+    #[kani::proof]
+    #[kani::unwind(2)]
+    fn verify_adc_scaling_bounded() {
+        super::adc_scaling_bounded(&mut KaniSource);
+    }
+    #[kani::proof]
+    #[kani::unwind(17)]
+    fn verify_speed_estimator_total() {
+        super::speed_estimator_total(&mut KaniSource);
+    }
+    #[kani::proof]
+    #[kani::unwind(17)]
+    fn verify_axis_bounded() {
+        super::axis_bounded(&mut KaniSource);
+    }
+    #[kani::proof]
+    #[kani::unwind(3)]
+    fn verify_liveness_total() {
+        super::liveness_total(&mut KaniSource);
+    }
+}
+
+#[cfg(test)]
+mod twins {
+    use statemachine::harness::Twin;
+
+    const CASES: u32 = 50_000;
+
+    #[test]
+    fn pid_bounded() {
+        Twin::run(0xC0_01, CASES, super::pid_bounded).assert_covered(4);
+    }
+    #[test]
+    fn current_pi_bounded() {
+        Twin::run(0xC0_02, CASES, super::current_pi_bounded).assert_covered(2);
+    }
+    #[test]
+    fn rate_limiter_bounded() {
+        Twin::run(0xC0_03, CASES, super::rate_limiter_bounded).assert_covered(2);
+    }
+    #[test]
+    fn kinematics_total() {
+        Twin::run(0xC0_04, CASES, super::kinematics_total).assert_covered(2);
+    }
+    #[test]
+    fn bridge_compare_safe() {
+        Twin::run(0xC0_05, CASES, super::bridge_compare_safe).assert_covered(2);
+    }
+    #[test]
+    fn adc_scaling_bounded() {
+        Twin::run(0xC0_06, CASES, super::adc_scaling_bounded).assert_covered(2);
+    }
+    #[test]
+    fn speed_estimator_total() {
+        Twin::run(0xC0_07, CASES, super::speed_estimator_total).assert_covered(1);
+    }
+    #[test]
+    fn axis_bounded() {
+        Twin::run(0xC0_08, CASES, super::axis_bounded).assert_covered(1);
+    }
+    #[test]
+    fn liveness_total() {
+        Twin::run(0xC0_09, CASES, super::liveness_total).assert_covered(1);
+    }
+}

@@ -1,0 +1,405 @@
+//! Seed 000: the 1 kHz Jetson ↔ STM32 SPI link, `MotorCommand` / `MotorFeedback` in protobuf wire format.
+//!
+//! # Transaction
+//!
+//! The Jetson (master) clocks one [`FRAME_LEN`]-byte full-duplex transaction every millisecond: a
+//! command frame goes out on MOSI while the feedback frame the MCU prepared comes back on MISO.
+//!
+//! ```text
+//!  t (µs)   0        256                                   1000
+//!  CS       ‾‾\______________________/‾‾‾‾‾‾‾‾‾‾‾‾‾‾‾‾‾‾‾‾‾‾‾‾‾‾‾‾‾\___
+//!  MOSI        [ command frame n, 64 B ]                          [ n+1
+//!  MISO        [ feedback frame (answers n−1), 64 B ]             [
+//!  MCU                                   DMA done → decode (CRC, protobuf, version)
+//!                                        → Event::Frame / Event::Rejected → ladder
+//!                                        → encode feedback for n+1 → re-arm DMA
+//! ```
+//! 64 bytes at 2 MHz take 256 µs; the seed budgets ≈ 0.2 ms for the transfer within the 1 ms cycle.
+//!
+//! # Frame (both directions)
+//!
+//! ```text
+//!  offset  0      1 ............................ 1+LEN ........ 61  62       63
+//!        ┌─────┬───────────────────────────────┬────────────────┬─────────┬─────────┐
+//!        │ LEN │ message, protobuf wire format │ zero padding   │ CRC lo  │ CRC hi  │
+//!        └─────┴───────────────────────────────┴────────────────┴─────────┴─────────┘
+//!          LEN ≤ 61        CRC-16/CCITT-FALSE over bytes 0..62, stored little-endian
+//! ```
+//!
+//! Why the CRC sits at a fixed offset at the end and covers the whole frame, padding included:
+//! - the receiver checks integrity before it trusts any byte, the length included (a corrupted
+//!   length can never make it read the wrong bytes as a CRC);
+//! - every one of the 512 bits is protected, so every single-bit error, and every burst of up to
+//!   16 bits, is detected (CRC-16 guarantees; the harnesses and `examples/residual_error.rs` check it);
+//! - the work is the same for every frame (62 bytes), which keeps the receive path's time constant;
+//! - a bus stuck at 0x00 or 0xFF fails the CRC (0x00… would need CRC 0x0000, 0xFF… would need 0xFFFF).
+//!
+//! The length is one byte before the payload because protobuf has no terminator: the padding
+//! cannot be parsed as fields (a zero key is invalid). Padding must be zero, so each message has
+//! exactly one valid frame.
+//!
+//! # Version and sequence
+//!
+//! Both messages carry `protocol_version` (must equal [`PROTOCOL_VERSION`]; a frame without it,
+//! e.g. from the original seed-format sender, is refused with [`RejectReason::Version`]) and `seq`.
+//! The Jetson increments the command `seq` for every new command; the MCU passes it to
+//! [`statemachine::validate`], which refuses a repeated or older value (serial-number arithmetic,
+//! wrap-around allowed) as [`RejectReason::Stale`], so a frame replayed by a stuck DMA buffer or a
+//! retransmitting bridge never feeds the watchdog. The feedback carries its own `seq` (the host
+//! detects a frozen MCU that keeps sending the same buffer) and `cmd_seq`, the last command the MCU
+//! accepted (the host measures the command round trip and sees rejections).
+
+use crate::crc16;
+use crate::pb::{self, DecodeError, Reader, Writer};
+use statemachine::{Command, RejectReason};
+
+/// Bytes per direction per SPI transaction.
+pub const FRAME_LEN: usize = 64;
+
+/// The protocol version both sides must send; bump it on any incompatible change.
+pub const PROTOCOL_VERSION: u32 = 1;
+
+/// Offset of the length byte.
+pub const LEN_OFFSET: usize = 0;
+/// Offset of the first payload byte.
+pub const PAYLOAD_OFFSET: usize = 1;
+/// Offset of the CRC (little-endian), the last two bytes of the frame.
+pub const CRC_OFFSET: usize = FRAME_LEN - 2;
+/// Room for the protobuf payload.
+pub const MAX_PAYLOAD: usize = CRC_OFFSET - PAYLOAD_OFFSET;
+
+/// Field numbers of `MotorCommand` (they must match `proto/amr.proto`; a test checks).
+pub mod command_field {
+    /// `fixed32 timestamp_us`.
+    pub const TIMESTAMP_US: u32 = 1;
+    /// `float left_speed_cmd`.
+    pub const LEFT_SPEED_CMD: u32 = 2;
+    /// `float right_speed_cmd`.
+    pub const RIGHT_SPEED_CMD: u32 = 3;
+    /// `uint32 control_mode` (uint8 on the MCU).
+    pub const CONTROL_MODE: u32 = 4;
+    /// `uint32 enable` (uint8 on the MCU, 0 or 1).
+    pub const ENABLE: u32 = 5;
+    /// `fixed32 seq`.
+    pub const SEQ: u32 = 7;
+    /// `uint32 protocol_version`.
+    pub const PROTOCOL_VERSION: u32 = 8;
+}
+
+/// Field numbers of `MotorFeedback` (they must match `proto/amr.proto`; a test checks).
+pub mod feedback_field {
+    /// `fixed32 timestamp_us`.
+    pub const TIMESTAMP_US: u32 = 1;
+    /// `float left_speed`.
+    pub const LEFT_SPEED: u32 = 2;
+    /// `float right_speed`.
+    pub const RIGHT_SPEED: u32 = 3;
+    /// `float left_current`.
+    pub const LEFT_CURRENT: u32 = 4;
+    /// `float right_current`.
+    pub const RIGHT_CURRENT: u32 = 5;
+    /// `sint32 left_encoder`.
+    pub const LEFT_ENCODER: u32 = 6;
+    /// `sint32 right_encoder`.
+    pub const RIGHT_ENCODER: u32 = 7;
+    /// `uint32 fault_flags` (uint16 on the MCU).
+    pub const FAULT_FLAGS: u32 = 8;
+    /// `fixed32 seq`.
+    pub const SEQ: u32 = 10;
+    /// `uint32 mode` (uint8 on the MCU).
+    pub const MODE: u32 = 11;
+    /// `fixed32 cmd_seq`.
+    pub const CMD_SEQ: u32 = 12;
+    /// `uint32 protocol_version`.
+    pub const PROTOCOL_VERSION: u32 = 13;
+}
+
+/// Largest `MotorCommand` payload this encoder writes (every field at its longest).
+pub const MAX_COMMAND_LEN: usize = {
+    use command_field as f;
+    pb::max_fixed32(f::TIMESTAMP_US)
+        + pb::max_fixed32(f::LEFT_SPEED_CMD)
+        + pb::max_fixed32(f::RIGHT_SPEED_CMD)
+        + pb::max_uint32(f::CONTROL_MODE)
+        + pb::max_uint32_upto(f::ENABLE, 1)
+        + pb::max_fixed32(f::SEQ)
+        + pb::max_uint32_upto(f::PROTOCOL_VERSION, PROTOCOL_VERSION)
+};
+
+/// Largest `MotorFeedback` payload this encoder writes (every field at its longest).
+pub const MAX_FEEDBACK_LEN: usize = {
+    use feedback_field as f;
+    pb::max_fixed32(f::TIMESTAMP_US)
+        + pb::max_fixed32(f::LEFT_SPEED)
+        + pb::max_fixed32(f::RIGHT_SPEED)
+        + pb::max_fixed32(f::LEFT_CURRENT)
+        + pb::max_fixed32(f::RIGHT_CURRENT)
+        + pb::max_sint32(f::LEFT_ENCODER)
+        + pb::max_sint32(f::RIGHT_ENCODER)
+        + pb::max_uint32(f::FAULT_FLAGS)
+        + pb::max_fixed32(f::SEQ)
+        + pb::max_uint32(f::MODE)
+        + pb::max_fixed32(f::CMD_SEQ)
+        + pb::max_uint32_upto(f::PROTOCOL_VERSION, PROTOCOL_VERSION)
+};
+
+/// nanopb's `amr_MotorCommand_size` for our `.options` (narrow fields at their declared size).
+pub const NANOPB_COMMAND_SIZE: usize = {
+    use command_field as f;
+    MAX_COMMAND_LEN - pb::max_uint32(f::CONTROL_MODE) + pb::max_uint32_upto(f::CONTROL_MODE, 0xFF)
+        - pb::max_uint32_upto(f::ENABLE, 1)
+        + pb::max_uint32_upto(f::ENABLE, 0xFF)
+        - pb::max_uint32_upto(f::PROTOCOL_VERSION, PROTOCOL_VERSION)
+        + pb::max_uint32(f::PROTOCOL_VERSION)
+};
+
+/// nanopb's `amr_MotorFeedback_size` for our `.options`.
+pub const NANOPB_FEEDBACK_SIZE: usize = {
+    use feedback_field as f;
+    MAX_FEEDBACK_LEN - pb::max_uint32(f::FAULT_FLAGS) + pb::max_uint32_upto(f::FAULT_FLAGS, 0xFFFF)
+        - pb::max_uint32(f::MODE)
+        + pb::max_uint32_upto(f::MODE, 0xFF)
+        - pb::max_uint32_upto(f::PROTOCOL_VERSION, PROTOCOL_VERSION)
+        + pb::max_uint32(f::PROTOCOL_VERSION)
+};
+
+// The proof that every message fits its frame, checked by the compiler.
+const _: () = assert!(MAX_COMMAND_LEN <= MAX_PAYLOAD);
+const _: () = assert!(MAX_FEEDBACK_LEN <= MAX_PAYLOAD);
+const _: () = assert!(NANOPB_COMMAND_SIZE <= MAX_PAYLOAD);
+const _: () = assert!(NANOPB_FEEDBACK_SIZE <= MAX_PAYLOAD);
+// The length byte can hold every payload length.
+const _: () = assert!(MAX_PAYLOAD <= u8::MAX as usize);
+// The version is a one-byte varint, as the size bounds above assume.
+const _: () = assert!(PROTOCOL_VERSION >= 1 && PROTOCOL_VERSION < 0x80);
+
+/// Jetson → MCU, every 1 ms (seed 000 `MotorCommand`, plus sequence and version).
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct MotorCommand {
+    /// Jetson's microsecond clock when the command was built.
+    pub timestamp_us: u32,
+    /// Left wheel speed, rad/s at the wheel (unchecked: validation is the ladder's job).
+    pub left_speed_cmd: f32,
+    /// Right wheel speed, rad/s at the wheel.
+    pub right_speed_cmd: f32,
+    /// 0 idle, 1 speed, 2 position, 3 raw duty. Values above 255 cannot be sent (nanopb `uint8`):
+    /// the encoder writes them, every decoder refuses them.
+    pub control_mode: u32,
+    /// Drive enable.
+    pub enable: bool,
+    /// Command sequence number: +1 for every new command, wrapping.
+    pub seq: u32,
+}
+
+/// MCU → Jetson, in the same transaction (seed 000 `MotorFeedback`, plus sequence, mode and version).
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct MotorFeedback {
+    /// MCU's microsecond clock when the frame was prepared.
+    pub timestamp_us: u32,
+    /// Measured left wheel speed, rad/s.
+    pub left_speed: f32,
+    /// Measured right wheel speed, rad/s.
+    pub right_speed: f32,
+    /// Measured left motor current, A.
+    pub left_current: f32,
+    /// Measured right motor current, A.
+    pub right_current: f32,
+    /// Cumulative left encoder count.
+    pub left_encoder: i32,
+    /// Cumulative right encoder count.
+    pub right_encoder: i32,
+    /// [`statemachine::FaultFlags`] bits; values above 0xFFFF cannot be sent (nanopb `uint16`).
+    pub fault_flags: u32,
+    /// Feedback sequence number: +1 per frame, wrapping.
+    pub seq: u32,
+    /// Ladder rung ([`statemachine::Mode`] as u8: 0 NORMAL … 4 BRAKE); values above 255 cannot be sent.
+    pub mode: u32,
+    /// `seq` of the last command the MCU accepted (0 before the first).
+    pub cmd_seq: u32,
+}
+
+impl MotorCommand {
+    /// The command as the safety core sees it (the ladder validates it).
+    pub fn to_command(&self) -> Command {
+        Command {
+            left: self.left_speed_cmd,
+            right: self.right_speed_cmd,
+            mode: self.control_mode,
+            enable: self.enable,
+            seq: Some(self.seq),
+        }
+    }
+}
+
+impl MotorFeedback {
+    /// Fills the ladder-derived fields from the ladder's output.
+    pub fn with_output(mut self, out: &statemachine::Output) -> Self {
+        self.fault_flags = u32::from(out.faults.0);
+        self.mode = u32::from(out.mode as u8);
+        self
+    }
+}
+
+fn seal(out: &mut [u8; FRAME_LEN], payload_len: usize) {
+    if let Some(len) = out.get_mut(LEN_OFFSET) {
+        // payload_len ≤ MAX_PAYLOAD ≤ 255 (const-asserted).
+        *len = u8::try_from(payload_len).unwrap_or(u8::MAX);
+    }
+    let crc = crc16::checksum(out.get(..CRC_OFFSET).unwrap_or(&[]));
+    if let Some(slot) = out.get_mut(CRC_OFFSET..) {
+        slot.copy_from_slice(&crc.to_le_bytes());
+    }
+}
+
+/// Checks CRC, length and padding; returns the payload.
+fn open(frame: &[u8; FRAME_LEN]) -> Result<&[u8], RejectReason> {
+    let (body, crc) = frame.split_at(CRC_OFFSET);
+    let mut stored = [0u8; 2];
+    stored.copy_from_slice(crc);
+    if crc16::checksum(body) != u16::from_le_bytes(stored) {
+        return Err(RejectReason::Crc);
+    }
+    let len = usize::from(*body.get(LEN_OFFSET).ok_or(RejectReason::Framing)?);
+    let end = PAYLOAD_OFFSET.saturating_add(len);
+    let payload = body.get(PAYLOAD_OFFSET..end).ok_or(RejectReason::Framing)?;
+    let padding = body.get(end..).ok_or(RejectReason::Framing)?;
+    if padding.iter().any(|&b| b != 0) {
+        return Err(RejectReason::Framing);
+    }
+    Ok(payload)
+}
+
+/// Encodes `cmd` into a complete frame (length, payload, zero padding, CRC); `protocol_version` is
+/// written as [`PROTOCOL_VERSION`].
+pub fn encode_command(cmd: &MotorCommand, out: &mut [u8; FRAME_LEN]) {
+    out.fill(0);
+    let len = {
+        let mut w = Writer::new(out.get_mut(PAYLOAD_OFFSET..CRC_OFFSET).unwrap_or(&mut []));
+        write_command(&mut w, cmd);
+        w.len()
+    };
+    seal(out, len);
+}
+
+fn write_command(w: &mut Writer<'_>, cmd: &MotorCommand) {
+    use command_field as f;
+    w.fixed32(f::TIMESTAMP_US, cmd.timestamp_us);
+    w.float(f::LEFT_SPEED_CMD, cmd.left_speed_cmd);
+    w.float(f::RIGHT_SPEED_CMD, cmd.right_speed_cmd);
+    w.uint32(f::CONTROL_MODE, cmd.control_mode);
+    w.uint32(f::ENABLE, u32::from(cmd.enable));
+    w.fixed32(f::SEQ, cmd.seq);
+    w.uint32(f::PROTOCOL_VERSION, PROTOCOL_VERSION);
+}
+
+/// Encodes `fb` into a complete frame; `protocol_version` is written as [`PROTOCOL_VERSION`].
+pub fn encode_feedback(fb: &MotorFeedback, out: &mut [u8; FRAME_LEN]) {
+    out.fill(0);
+    let len = {
+        let mut w = Writer::new(out.get_mut(PAYLOAD_OFFSET..CRC_OFFSET).unwrap_or(&mut []));
+        write_feedback(&mut w, fb);
+        w.len()
+    };
+    seal(out, len);
+}
+
+fn write_feedback(w: &mut Writer<'_>, fb: &MotorFeedback) {
+    use feedback_field as f;
+    w.fixed32(f::TIMESTAMP_US, fb.timestamp_us);
+    w.float(f::LEFT_SPEED, fb.left_speed);
+    w.float(f::RIGHT_SPEED, fb.right_speed);
+    w.float(f::LEFT_CURRENT, fb.left_current);
+    w.float(f::RIGHT_CURRENT, fb.right_current);
+    w.sint32(f::LEFT_ENCODER, fb.left_encoder);
+    w.sint32(f::RIGHT_ENCODER, fb.right_encoder);
+    w.uint32(f::FAULT_FLAGS, fb.fault_flags);
+    w.fixed32(f::SEQ, fb.seq);
+    w.uint32(f::MODE, fb.mode);
+    w.fixed32(f::CMD_SEQ, fb.cmd_seq);
+    w.uint32(f::PROTOCOL_VERSION, PROTOCOL_VERSION);
+}
+
+/// Decodes a command frame.
+///
+/// Checks, in order: CRC ([`RejectReason::Crc`]); length ≤ [`MAX_PAYLOAD`] and zero padding
+/// ([`RejectReason::Framing`]); protobuf ([`RejectReason::Decode`]: truncated, wrong wire type for a
+/// known field, `enable` not 0/1, `control_mode` > 255); version ([`RejectReason::Version`]).
+/// Unknown fields are skipped; a repeated field keeps its last value.
+pub fn decode_command(frame: &[u8; FRAME_LEN]) -> Result<MotorCommand, RejectReason> {
+    let payload = open(frame)?;
+    let (cmd, version) = decode_command_payload(payload).map_err(|_| RejectReason::Decode)?;
+    if version != PROTOCOL_VERSION {
+        return Err(RejectReason::Version);
+    }
+    Ok(cmd)
+}
+
+/// Decodes a `MotorCommand` protobuf payload; returns the message and its `protocol_version`.
+fn decode_command_payload(payload: &[u8]) -> Result<(MotorCommand, u32), DecodeError> {
+    use command_field as f;
+    let mut cmd = MotorCommand::default();
+    let mut version = 0;
+    let mut r = Reader::new(payload);
+    while let Some((field, v)) = r.next_field()? {
+        match field {
+            f::TIMESTAMP_US => cmd.timestamp_us = v.fixed32()?,
+            f::LEFT_SPEED_CMD => cmd.left_speed_cmd = v.float()?,
+            f::RIGHT_SPEED_CMD => cmd.right_speed_cmd = v.float()?,
+            f::CONTROL_MODE => cmd.control_mode = v.uint32_upto(0xFF)?,
+            f::ENABLE => cmd.enable = v.uint32_upto(1)? == 1,
+            f::SEQ => cmd.seq = v.fixed32()?,
+            f::PROTOCOL_VERSION => version = v.uint32()?,
+            _ => {}
+        }
+    }
+    Ok((cmd, version))
+}
+
+/// Decodes a feedback frame; the same checks as [`decode_command`] (`fault_flags` > 0xFFFF and
+/// `mode` > 255 are [`RejectReason::Decode`]).
+pub fn decode_feedback(frame: &[u8; FRAME_LEN]) -> Result<MotorFeedback, RejectReason> {
+    let payload = open(frame)?;
+    let (fb, version) = decode_feedback_payload(payload).map_err(|_| RejectReason::Decode)?;
+    if version != PROTOCOL_VERSION {
+        return Err(RejectReason::Version);
+    }
+    Ok(fb)
+}
+
+fn decode_feedback_payload(payload: &[u8]) -> Result<(MotorFeedback, u32), DecodeError> {
+    use feedback_field as f;
+    let mut fb = MotorFeedback::default();
+    let mut version = 0;
+    let mut r = Reader::new(payload);
+    while let Some((field, v)) = r.next_field()? {
+        match field {
+            f::TIMESTAMP_US => fb.timestamp_us = v.fixed32()?,
+            f::LEFT_SPEED => fb.left_speed = v.float()?,
+            f::RIGHT_SPEED => fb.right_speed = v.float()?,
+            f::LEFT_CURRENT => fb.left_current = v.float()?,
+            f::RIGHT_CURRENT => fb.right_current = v.float()?,
+            f::LEFT_ENCODER => fb.left_encoder = v.sint32()?,
+            f::RIGHT_ENCODER => fb.right_encoder = v.sint32()?,
+            f::FAULT_FLAGS => fb.fault_flags = v.uint32_upto(0xFFFF)?,
+            f::SEQ => fb.seq = v.fixed32()?,
+            f::MODE => fb.mode = v.uint32_upto(0xFF)?,
+            f::CMD_SEQ => fb.cmd_seq = v.fixed32()?,
+            f::PROTOCOL_VERSION => version = v.uint32()?,
+            _ => {}
+        }
+    }
+    Ok((fb, version))
+}
+
+/// The ladder event for a received command frame: `Frame(command)` or `Rejected(reason)`.
+pub fn command_event(frame: &[u8; FRAME_LEN]) -> statemachine::Event {
+    crate::event_from(decode_command(frame).map(|c| c.to_command()))
+}
+
+#[cfg(test)]
+mod tests;
+
+#[cfg(any(test, kani))]
+mod verification;

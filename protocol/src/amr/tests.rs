@@ -1,0 +1,275 @@
+//! Unit tests of the seed 000 frame: hand-derived encodings, protobuf rules, framing errors.
+
+use super::*;
+
+/// Builds a frame around `payload` with a correct CRC, the way an independent sender would.
+fn frame_with(payload: &[u8]) -> [u8; FRAME_LEN] {
+    let mut f = [0u8; FRAME_LEN];
+    f[0] = payload.len() as u8;
+    f[1..1 + payload.len()].copy_from_slice(payload);
+    let crc = crc16::checksum(&f[..62]);
+    f[62..].copy_from_slice(&crc.to_le_bytes());
+    f
+}
+
+/// The version field (8, varint 1) that every valid command carries.
+const V1: [u8; 2] = [0x40, 0x01];
+
+#[test]
+fn command_bytes_derived_by_hand_from_the_protobuf_spec() {
+    let cmd = MotorCommand {
+        timestamp_us: 0x0102_0304,
+        left_speed_cmd: 1.0,   // 0x3F800000
+        right_speed_cmd: -2.5, // 0xC0200000
+        control_mode: 1,
+        enable: true,
+        seq: 7,
+    };
+    let mut f = [0u8; FRAME_LEN];
+    encode_command(&cmd, &mut f);
+    let want: [u8; 28] = [
+        0x0D, 0x04, 0x03, 0x02, 0x01, // field 1, I32
+        0x15, 0x00, 0x00, 0x80, 0x3F, // field 2, I32
+        0x1D, 0x00, 0x00, 0x20, 0xC0, // field 3, I32
+        0x20, 0x01, // field 4, varint 1
+        0x28, 0x01, // field 5, varint 1
+        0x3D, 0x07, 0x00, 0x00, 0x00, // field 7, I32
+        0x40, 0x01, // field 8, varint 1
+        0x00, 0x00, // padding starts
+    ];
+    assert_eq!(f[0], 26);
+    assert_eq!(f[1..29], want);
+    assert!(f[27..62].iter().all(|&b| b == 0));
+    assert_eq!(f, frame_with(&want[..26]));
+    assert_eq!(decode_command(&f), Ok(cmd));
+}
+
+#[test]
+fn zero_fields_are_omitted_and_an_empty_command_is_just_the_version() {
+    let mut f = [0u8; FRAME_LEN];
+    encode_command(&MotorCommand::default(), &mut f);
+    assert_eq!(f, frame_with(&V1));
+}
+
+#[test]
+fn negative_encoder_counts_use_zigzag() {
+    let fb = MotorFeedback {
+        left_encoder: -1,
+        right_encoder: 1,
+        ..Default::default()
+    };
+    let mut f = [0u8; FRAME_LEN];
+    encode_feedback(&fb, &mut f);
+    assert_eq!(f, frame_with(&[0x30, 0x01, 0x38, 0x02, 0x68, 0x01]));
+    assert_eq!(decode_feedback(&f), Ok(fb));
+}
+
+#[test]
+fn stuck_bus_frames_fail_the_crc() {
+    assert_eq!(decode_command(&[0x00; FRAME_LEN]), Err(RejectReason::Crc));
+    assert_eq!(decode_command(&[0xFF; FRAME_LEN]), Err(RejectReason::Crc));
+    assert_eq!(decode_feedback(&[0x00; FRAME_LEN]), Err(RejectReason::Crc));
+    assert_eq!(decode_feedback(&[0xFF; FRAME_LEN]), Err(RejectReason::Crc));
+}
+
+#[test]
+fn framing_errors() {
+    // Length beyond the payload area, CRC valid.
+    let mut f = frame_with(&V1);
+    f[0] = 62;
+    let crc = crc16::checksum(&f[..62]);
+    f[62..].copy_from_slice(&crc.to_le_bytes());
+    assert_eq!(decode_command(&f), Err(RejectReason::Framing));
+    // Non-zero padding, CRC valid.
+    let mut f = frame_with(&V1);
+    f[40] = 1;
+    let crc = crc16::checksum(&f[..62]);
+    f[62..].copy_from_slice(&crc.to_le_bytes());
+    assert_eq!(decode_command(&f), Err(RejectReason::Framing));
+}
+
+#[test]
+fn version_missing_or_wrong() {
+    // A seed-era sender: no version field.
+    assert_eq!(
+        decode_command(&frame_with(&[0x20, 0x01])),
+        Err(RejectReason::Version)
+    );
+    assert_eq!(decode_command(&frame_with(&[])), Err(RejectReason::Version));
+    assert_eq!(
+        decode_command(&frame_with(&[0x40, 0x02])),
+        Err(RejectReason::Version)
+    );
+    assert_eq!(
+        decode_feedback(&frame_with(&[0x68, 0x02])),
+        Err(RejectReason::Version)
+    );
+    // Version 300 is a version error, not a decode error (the field is a full uint32).
+    assert_eq!(
+        decode_command(&frame_with(&[0x40, 0xAC, 0x02])),
+        Err(RejectReason::Version)
+    );
+}
+
+#[test]
+fn unknown_fields_of_every_wire_type_are_skipped() {
+    let payload = [
+        0x30, 0x05, // field 6 (reserved, was crc16), varint
+        0x49, 1, 2, 3, 4, 5, 6, 7, 8, // field 9, I64
+        0x52, 0x03, 0xAA, 0xBB, 0xCC, // field 10, LEN 3
+        0x5D, 1, 2, 3, 4, // field 11, I32
+        0xF8, 0xFF, 0xFF, 0xFF, 0x0F, 0x00, // field 2^29-1, varint
+        0x20, 0x01, 0x40, 0x01,
+    ];
+    let cmd = decode_command(&frame_with(&payload)).unwrap();
+    assert_eq!(cmd.control_mode, 1);
+}
+
+#[test]
+fn duplicate_fields_last_one_wins() {
+    let payload = [
+        0x20, 0x00, 0x3D, 1, 0, 0, 0, 0x20, 0x01, 0x3D, 9, 0, 0, 0, 0x40, 0x01,
+    ];
+    let cmd = decode_command(&frame_with(&payload)).unwrap();
+    assert_eq!(cmd.control_mode, 1);
+    assert_eq!(cmd.seq, 9);
+}
+
+#[test]
+fn wrong_wire_type_or_range_is_a_decode_error() {
+    for bad in [
+        &[0x08, 0x01, 0x40, 0x01][..],   // timestamp as varint (it is fixed32)
+        &[0x25, 0, 0, 0, 0, 0x40, 0x01], // control_mode as I32
+        &[0x45, 1, 0, 0, 0],             // version as I32
+        &[0x28, 0x02, 0x40, 0x01],       // enable = 2
+        &[0x20, 0x80, 0x02, 0x40, 0x01], // control_mode = 256 (uint8 on the MCU)
+        &[0x40],                         // truncated
+        &[0x40, 0x80],                   // truncated varint
+        &[0x00, 0x40, 0x01],             // field 0
+        &[0x12, 0x05, 0x40, 0x01],       // LEN past the end
+        &[0x0B, 0x0C, 0x40, 0x01],       // group
+    ] {
+        assert_eq!(
+            decode_command(&frame_with(bad)),
+            Err(RejectReason::Decode),
+            "{bad:02x?}"
+        );
+    }
+    // Feedback: fault_flags above 16 bits, mode above 8 bits.
+    assert_eq!(
+        decode_feedback(&frame_with(&[0x40, 0x80, 0x80, 0x04, 0x68, 0x01])),
+        Err(RejectReason::Decode)
+    );
+    assert_eq!(
+        decode_feedback(&frame_with(&[0x58, 0x80, 0x02, 0x68, 0x01])),
+        Err(RejectReason::Decode)
+    );
+}
+
+#[test]
+fn size_bounds() {
+    assert_eq!(MAX_COMMAND_LEN, 30);
+    assert_eq!(MAX_FEEDBACK_LEN, 61);
+    assert_eq!(NANOPB_COMMAND_SIZE, 32);
+    assert_eq!(NANOPB_FEEDBACK_SIZE, 60);
+    // The longest messages really are that long.
+    let cmd = MotorCommand {
+        timestamp_us: u32::MAX,
+        left_speed_cmd: f32::MIN,
+        right_speed_cmd: f32::MAX,
+        control_mode: u32::MAX,
+        enable: true,
+        seq: u32::MAX,
+    };
+    let mut f = [0u8; FRAME_LEN];
+    encode_command(&cmd, &mut f);
+    assert_eq!(usize::from(f[0]), MAX_COMMAND_LEN);
+    let fb = MotorFeedback {
+        timestamp_us: 1,
+        left_speed: 1.0,
+        right_speed: 1.0,
+        left_current: 1.0,
+        right_current: 1.0,
+        left_encoder: i32::MIN,
+        right_encoder: i32::MIN,
+        fault_flags: u32::MAX,
+        seq: 1,
+        mode: u32::MAX,
+        cmd_seq: 1,
+    };
+    encode_feedback(&fb, &mut f);
+    assert_eq!(usize::from(f[0]), MAX_FEEDBACK_LEN);
+    // Out-of-range narrow fields are written but refused, as nanopb refuses them.
+    assert_eq!(decode_feedback(&f), Err(RejectReason::Decode));
+}
+
+/// The field numbers in Rust agree with the shipped `.proto`.
+#[test]
+fn field_numbers_match_the_proto_file() {
+    let proto = include_str!("../../proto/amr.proto");
+    let number = |message: &str, name: &str| -> u32 {
+        let body = proto
+            .split(&format!("message {message} {{"))
+            .nth(1)
+            .unwrap();
+        let body = body.split('}').next().unwrap();
+        let line = body
+            .lines()
+            .find(|l| l.split_whitespace().nth(1) == Some(name))
+            .unwrap_or_else(|| panic!("{message}.{name} not in amr.proto"));
+        let n = line.split('=').nth(1).unwrap().split(';').next().unwrap();
+        n.trim().parse().unwrap()
+    };
+    use command_field as c;
+    for (name, n) in [
+        ("timestamp_us", c::TIMESTAMP_US),
+        ("left_speed_cmd", c::LEFT_SPEED_CMD),
+        ("right_speed_cmd", c::RIGHT_SPEED_CMD),
+        ("control_mode", c::CONTROL_MODE),
+        ("enable", c::ENABLE),
+        ("seq", c::SEQ),
+        ("protocol_version", c::PROTOCOL_VERSION),
+    ] {
+        assert_eq!(number("MotorCommand", name), n, "{name}");
+    }
+    use feedback_field as b;
+    for (name, n) in [
+        ("timestamp_us", b::TIMESTAMP_US),
+        ("left_speed", b::LEFT_SPEED),
+        ("right_speed", b::RIGHT_SPEED),
+        ("left_current", b::LEFT_CURRENT),
+        ("right_current", b::RIGHT_CURRENT),
+        ("left_encoder", b::LEFT_ENCODER),
+        ("right_encoder", b::RIGHT_ENCODER),
+        ("fault_flags", b::FAULT_FLAGS),
+        ("seq", b::SEQ),
+        ("mode", b::MODE),
+        ("cmd_seq", b::CMD_SEQ),
+        ("protocol_version", b::PROTOCOL_VERSION),
+    ] {
+        assert_eq!(number("MotorFeedback", name), n, "{name}");
+    }
+}
+
+#[test]
+fn a_repeated_frame_is_stale_for_the_ladder() {
+    use statemachine::{Config, Event, Ladder};
+    let mut ladder = Ladder::new(Config::DEFAULT);
+    let mut f = [0u8; FRAME_LEN];
+    let mut cmd = MotorCommand {
+        control_mode: 1,
+        seq: 1,
+        ..Default::default()
+    };
+    encode_command(&cmd, &mut f);
+    ladder.step(command_event(&f));
+    let before = ladder.counters().rejected(RejectReason::Stale);
+    ladder.step(command_event(&f)); // the same frame again
+    assert_eq!(ladder.counters().rejected(RejectReason::Stale), before + 1);
+    cmd.seq = 2;
+    encode_command(&cmd, &mut f);
+    ladder.step(command_event(&f));
+    assert_eq!(ladder.counters().rejected(RejectReason::Stale), before + 1);
+    f[10] ^= 1;
+    assert_eq!(command_event(&f), Event::Rejected(RejectReason::Crc));
+}

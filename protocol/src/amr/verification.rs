@@ -1,0 +1,313 @@
+//! Kani harnesses of the seed 000 codec and their `cargo test` twins: total decoders, round trips,
+//! single-bit errors always detected.
+
+use super::*;
+use statemachine::harness::Source;
+use statemachine::{assume, cover};
+
+pub(crate) fn any_command(src: &mut impl Source) -> MotorCommand {
+    MotorCommand {
+        timestamp_us: src.u32(),
+        left_speed_cmd: src.f32(),
+        right_speed_cmd: src.f32(),
+        control_mode: src.u32(),
+        enable: src.bool(),
+        seq: src.u32(),
+    }
+}
+
+pub(crate) fn any_feedback(src: &mut impl Source) -> MotorFeedback {
+    MotorFeedback {
+        timestamp_us: src.u32(),
+        left_speed: src.f32(),
+        right_speed: src.f32(),
+        left_current: src.f32(),
+        right_current: src.f32(),
+        left_encoder: src.i32(),
+        right_encoder: src.i32(),
+        fault_flags: src.u32(),
+        seq: src.u32(),
+        mode: src.u32(),
+        cmd_seq: src.u32(),
+    }
+}
+
+/// Bitwise equality (NaN payloads and the sign of zero must survive the wire).
+fn same_command(a: &MotorCommand, b: &MotorCommand) -> bool {
+    a.timestamp_us == b.timestamp_us
+        && a.left_speed_cmd.to_bits() == b.left_speed_cmd.to_bits()
+        && a.right_speed_cmd.to_bits() == b.right_speed_cmd.to_bits()
+        && a.control_mode == b.control_mode
+        && a.enable == b.enable
+        && a.seq == b.seq
+}
+
+fn same_feedback(a: &MotorFeedback, b: &MotorFeedback) -> bool {
+    a.timestamp_us == b.timestamp_us
+        && a.left_speed.to_bits() == b.left_speed.to_bits()
+        && a.right_speed.to_bits() == b.right_speed.to_bits()
+        && a.left_current.to_bits() == b.left_current.to_bits()
+        && a.right_current.to_bits() == b.right_current.to_bits()
+        && a.left_encoder == b.left_encoder
+        && a.right_encoder == b.right_encoder
+        && a.fault_flags == b.fault_flags
+        && a.seq == b.seq
+        && a.mode == b.mode
+        && a.cmd_seq == b.cmd_seq
+}
+
+/// An input frame of one of three shapes: any 64 bytes; any payload in a well-formed frame with a
+/// correct CRC; a valid frame with one byte before the CRC replaced and the CRC fixed.
+fn shaped_frame<S: Source>(
+    src: &mut S,
+    encode_valid: impl FnOnce(&mut S, &mut [u8; FRAME_LEN]),
+) -> [u8; FRAME_LEN] {
+    let mut f = [0u8; FRAME_LEN];
+    match src.below(3) {
+        0 => {
+            for b in f.iter_mut() {
+                *b = src.u8();
+            }
+        }
+        1 => {
+            let len = usize::from(src.below(MAX_PAYLOAD as u8 + 1));
+            for b in f.iter_mut().skip(PAYLOAD_OFFSET).take(len) {
+                *b = src.u8();
+            }
+            seal(&mut f, len);
+        }
+        _ => {
+            // A valid frame with any byte before the CRC replaced (length, payload or padding), CRC fixed.
+            encode_valid(src, &mut f);
+            let i = usize::from(src.below(CRC_OFFSET as u8));
+            f[i] = src.u8();
+            let crc = crc16::checksum(&f[..CRC_OFFSET]);
+            f[CRC_OFFSET..].copy_from_slice(&crc.to_le_bytes());
+        }
+    }
+    f
+}
+
+/// `decode_command` returns `Ok` or a frame-level error for every 64-byte input.
+pub(crate) fn check_decode_command_total(src: &mut impl Source) {
+    let f = shaped_frame(src, |s, f| encode_command(&any_command(s), f));
+    let r = decode_command(&f);
+    assert!(matches!(
+        r,
+        Ok(_)
+            | Err(RejectReason::Crc
+                | RejectReason::Framing
+                | RejectReason::Decode
+                | RejectReason::Version)
+    ));
+    cover!(src, r.is_ok(), "command decoded");
+    cover!(src, r == Err(RejectReason::Crc), "command crc error");
+    cover!(
+        src,
+        r == Err(RejectReason::Framing),
+        "command framing error"
+    );
+    cover!(src, r == Err(RejectReason::Decode), "command decode error");
+    cover!(
+        src,
+        r == Err(RejectReason::Version),
+        "command version error"
+    );
+}
+
+/// `decode_feedback` returns `Ok` or a frame-level error for every 64-byte input.
+pub(crate) fn check_decode_feedback_total(src: &mut impl Source) {
+    let f = shaped_frame(src, |s, f| encode_feedback(&any_feedback(s), f));
+    let r = decode_feedback(&f);
+    assert!(matches!(
+        r,
+        Ok(_)
+            | Err(RejectReason::Crc
+                | RejectReason::Framing
+                | RejectReason::Decode
+                | RejectReason::Version)
+    ));
+    cover!(src, r.is_ok(), "feedback decoded");
+    cover!(src, r == Err(RejectReason::Crc), "feedback crc error");
+    cover!(
+        src,
+        r == Err(RejectReason::Framing),
+        "feedback framing error"
+    );
+    cover!(src, r == Err(RejectReason::Decode), "feedback decode error");
+    cover!(
+        src,
+        r == Err(RejectReason::Version),
+        "feedback version error"
+    );
+}
+
+/// encode → decode gives back the same command, bit for bit; out-of-range modes are refused, never truncated.
+pub(crate) fn check_command_round_trip(src: &mut impl Source) {
+    let cmd = any_command(src);
+    let mut f = [0u8; FRAME_LEN];
+    encode_command(&cmd, &mut f);
+    let r = decode_command(&f);
+    if cmd.control_mode <= 0xFF {
+        assert!(matches!(r, Ok(d) if same_command(&d, &cmd)));
+    } else {
+        assert_eq!(r, Err(RejectReason::Decode));
+    }
+    cover!(src, cmd.left_speed_cmd.is_nan(), "NaN speed round-trips");
+    cover!(src, cmd.control_mode > 0xFF, "out-of-range mode refused");
+    cover!(src, usize::from(f[0]) == MAX_COMMAND_LEN, "longest command");
+}
+
+/// encode → decode gives back the same feedback, bit for bit.
+pub(crate) fn check_feedback_round_trip(src: &mut impl Source) {
+    let fb = any_feedback(src);
+    let mut f = [0u8; FRAME_LEN];
+    encode_feedback(&fb, &mut f);
+    let r = decode_feedback(&f);
+    if fb.fault_flags <= 0xFFFF && fb.mode <= 0xFF {
+        assert!(matches!(r, Ok(d) if same_feedback(&d, &fb)));
+    } else {
+        assert_eq!(r, Err(RejectReason::Decode));
+    }
+    cover!(src, fb.left_encoder < 0, "negative encoder count");
+    cover!(
+        src,
+        fb.fault_flags <= 0xFFFF && fb.mode <= 0xFF && fb.fault_flags > 0,
+        "faults reported"
+    );
+    cover!(src, fb.mode > 0xFF, "out-of-range mode refused");
+}
+
+/// Flipping any one of the 512 bits of a valid command frame makes it rejected.
+pub(crate) fn check_command_bit_flip_detected(src: &mut impl Source) {
+    let cmd = any_command(src);
+    assume!(src, cmd.control_mode <= 0xFF);
+    let mut f = [0u8; FRAME_LEN];
+    encode_command(&cmd, &mut f);
+    let bit = usize::from(src.u16() % (FRAME_LEN as u16 * 8));
+    f[bit / 8] ^= 1 << (bit % 8);
+    assert!(decode_command(&f).is_err());
+    let byte = bit / 8;
+    let len = usize::from(f[0]);
+    cover!(src, byte == LEN_OFFSET, "flip in length");
+    cover!(
+        src,
+        byte >= PAYLOAD_OFFSET && byte < PAYLOAD_OFFSET + len,
+        "flip in payload"
+    );
+    cover!(
+        src,
+        byte >= PAYLOAD_OFFSET + len && byte < CRC_OFFSET,
+        "flip in padding"
+    );
+    cover!(src, byte >= CRC_OFFSET, "flip in crc");
+}
+
+/// Flipping any one of the 512 bits of a valid feedback frame makes it rejected.
+pub(crate) fn check_feedback_bit_flip_detected(src: &mut impl Source) {
+    let fb = any_feedback(src);
+    let mut f = [0u8; FRAME_LEN];
+    encode_feedback(&fb, &mut f);
+    let bit = usize::from(src.u16() % (FRAME_LEN as u16 * 8));
+    f[bit / 8] ^= 1 << (bit % 8);
+    assert!(decode_feedback(&f).is_err());
+    cover!(src, bit / 8 >= CRC_OFFSET, "flip in crc");
+    cover!(src, bit / 8 < CRC_OFFSET, "flip before crc");
+}
+
+#[cfg(kani)]
+mod proofs {
+    use super::*;
+    use statemachine::harness::KaniSource;
+
+    #[kani::proof]
+    #[kani::unwind(66)]
+    fn verify_decode_command_total() {
+        check_decode_command_total(&mut KaniSource);
+    }
+
+    #[kani::proof]
+    #[kani::unwind(66)]
+    fn verify_decode_feedback_total() {
+        check_decode_feedback_total(&mut KaniSource);
+    }
+
+    #[kani::proof]
+    #[kani::unwind(66)]
+    fn verify_command_round_trip() {
+        check_command_round_trip(&mut KaniSource);
+    }
+
+    #[kani::proof]
+    #[kani::unwind(66)]
+    fn verify_feedback_round_trip() {
+        check_feedback_round_trip(&mut KaniSource);
+    }
+
+    #[kani::proof]
+    #[kani::unwind(66)]
+    fn verify_command_bit_flip_detected() {
+        check_command_bit_flip_detected(&mut KaniSource);
+    }
+
+    #[kani::proof]
+    #[kani::unwind(66)]
+    fn verify_feedback_bit_flip_detected() {
+        check_feedback_bit_flip_detected(&mut KaniSource);
+    }
+}
+
+#[cfg(test)]
+mod twins {
+    use super::*;
+    use statemachine::harness::Twin;
+
+    const CASES: u32 = 20_000;
+
+    #[test]
+    fn decode_command_total() {
+        Twin::run(0xA3_0001, CASES, check_decode_command_total).assert_covered(5);
+    }
+
+    #[test]
+    fn decode_feedback_total() {
+        Twin::run(0xA3_0002, CASES, check_decode_feedback_total).assert_covered(5);
+    }
+
+    #[test]
+    fn command_round_trip() {
+        Twin::run(0xA3_0003, CASES, check_command_round_trip).assert_covered(3);
+    }
+
+    #[test]
+    fn feedback_round_trip() {
+        Twin::run(0xA3_0004, CASES, check_feedback_round_trip).assert_covered(3);
+    }
+
+    #[test]
+    fn command_bit_flip_detected() {
+        Twin::run(0xA3_0005, CASES, check_command_bit_flip_detected).assert_covered(4);
+    }
+
+    #[test]
+    fn feedback_bit_flip_detected() {
+        Twin::run(0xA3_0006, CASES, check_feedback_bit_flip_detected).assert_covered(2);
+    }
+
+    /// Every one of the 512 single-bit errors of a few frames, exhaustively.
+    #[test]
+    fn every_single_bit_flip_of_sample_frames() {
+        let mut t = Twin::new(7);
+        for _ in 0..50 {
+            let mut cmd = any_command(&mut t);
+            cmd.control_mode &= 0xFF;
+            let mut f = [0u8; FRAME_LEN];
+            encode_command(&cmd, &mut f);
+            for bit in 0..FRAME_LEN * 8 {
+                let mut g = f;
+                g[bit / 8] ^= 1 << (bit % 8);
+                assert!(decode_command(&g).is_err(), "bit {bit}");
+            }
+        }
+    }
+}

@@ -1,0 +1,620 @@
+//! Seed 001: the USB CDC / UART framing `AA 55 | MSG_ID | LEN | payload | CRC16 LE`, every message, and a resynchronising stream decoder.
+//!
+//! # Frame
+//!
+//! ```text
+//!  offset 0     1     2        3     4 ........ 4+LEN−1   4+LEN     4+LEN+1
+//!       ┌─────┬─────┬────────┬─────┬─────────────────────┬─────────┬─────────┐
+//!       │ AA  │ 55  │ MSG_ID │ LEN │ payload (LEN bytes) │ CRC lo  │ CRC hi  │
+//!       └─────┴─────┴────────┴─────┴─────────────────────┴─────────┴─────────┘
+//!                    └──────── CRC-16/CCITT-FALSE over MSG_ID, LEN, payload ─┘
+//! ```
+//! All multi-byte fields little-endian, signed fields two's complement. LEN is 0..=255, so a frame
+//! is 6..=[`MAX_FRAME_LEN`] bytes.
+//!
+//! The seed gives IMU_MPU6050 a 20-byte payload but lists 18 bytes of fields: 20 is `sizeof` of the
+//! naturally aligned C struct (4-byte alignment pads 18 to 20). LEN is 20 as the seed says; the last
+//! two bytes are reserved, sent as zero and ignored on receipt.
+//!
+//! # Payloads
+//!
+//! ```text
+//!  0x01 SET_MOTOR_PWM  Jetson→MCU 10 B  i16 pwm_m1 | i16 pwm_m2 | i16 pwm_m3 | i16 pwm_m4 | u16 timeout_ms
+//!  0x02 MOTOR_ENABLE   Jetson→MCU  1 B  u8 enable (0 off, 1 on)
+//!  0x03 ESTOP          Jetson→MCU  1 B  u8 action (1 engage and latch, 0 release)
+//!  0x10 PING           Jetson→MCU  0 B
+//!  0x81 IMU_MPU6050    MCU→Jetson 20 B  u32 t_ms | i16 ax ay az (mg) | i16 gx gy gz (mdps) | i16 temp_cdeg | 2 B reserved
+//!  0x82 STATUS         MCU→Jetson 10 B  u32 t_ms | u16 vbat_mV | u16 flags | u16 err
+//!  0x7F ACK            MCU→Jetson  2 B  u8 ack_msg_id | u8 result (0 OK)
+//! ```
+//!
+//! # Mapping onto the safety core
+//!
+//! | message              | ladder event                                                             |
+//! |----------------------|--------------------------------------------------------------------------|
+//! | `MOTOR_ENABLE` 1     | [`Event::Rearm`] (the explicit re-arm; BRAKE is left only if no latching cause is active) |
+//! | `MOTOR_ENABLE` 0     | [`Event::Frame`] with `enable = false` (STOP: zero target, speed loop on) |
+//! | `ESTOP` 1 / 0        | [`Event::Estop`] `Engage` / `Release`                                   |
+//! | `SET_MOTOR_PWM`      | [`Event::Frame`] in [`ControlMode::RawDuty`]: left = m1/1000, right = m2/1000 (duty fraction). The ladder refuses raw duty ([`RejectReason::UnsupportedMode`]) because it would bypass the speed limits; a board that drives open loop under its own supervision reads [`SetMotorPwm::duty`] instead. |
+//! | `PING`, MCU→Jetson   | none                                                                     |
+//!
+//! Protocol failures: bad CRC → [`RejectReason::Crc`]; bad SOF → [`RejectReason::Framing`]; wrong
+//! payload length, unknown MSG_ID or an out-of-range value → [`RejectReason::Decode`]
+//! (see [`Error::reason`]; [`Error::error_code`] gives the seed's STATUS `err` code).
+
+use crate::crc16;
+use crate::le;
+use statemachine::{Command, ControlMode, Estop, Event, RejectReason};
+
+/// Start-of-frame bytes.
+pub const SOF: [u8; 2] = [0xAA, 0x55];
+/// SOF, MSG_ID, LEN.
+pub const HEADER_LEN: usize = 4;
+/// CRC trailer.
+pub const CRC_LEN: usize = 2;
+/// Largest payload LEN can announce.
+pub const MAX_PAYLOAD: usize = 255;
+/// Largest frame: header, 255 payload bytes, CRC.
+pub const MAX_FRAME_LEN: usize = HEADER_LEN + MAX_PAYLOAD + CRC_LEN;
+
+/// Message identifiers (MSG_ID). Values fixed by the seed, never reused.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+#[repr(u8)]
+pub enum MsgId {
+    /// Four motor PWM commands.
+    SetMotorPwm = 0x01,
+    /// Enable or disable the motors.
+    MotorEnable = 0x02,
+    /// Engage or release the emergency stop.
+    Estop = 0x03,
+    /// Link probe.
+    Ping = 0x10,
+    /// Acknowledgement of a low-rate command.
+    Ack = 0x7F,
+    /// MPU6050 raw data.
+    Imu = 0x81,
+    /// Low-rate status.
+    Status = 0x82,
+}
+
+impl MsgId {
+    /// Maps a raw MSG_ID, `None` if the seed does not define it.
+    pub const fn from_raw(raw: u8) -> Option<Self> {
+        match raw {
+            0x01 => Some(Self::SetMotorPwm),
+            0x02 => Some(Self::MotorEnable),
+            0x03 => Some(Self::Estop),
+            0x10 => Some(Self::Ping),
+            0x7F => Some(Self::Ack),
+            0x81 => Some(Self::Imu),
+            0x82 => Some(Self::Status),
+            _ => None,
+        }
+    }
+
+    /// The payload length the seed fixes for this message.
+    pub const fn payload_len(self) -> usize {
+        match self {
+            Self::SetMotorPwm | Self::Status => 10,
+            Self::MotorEnable | Self::Estop => 1,
+            Self::Ping => 0,
+            Self::Ack => 2,
+            // 18 bytes of fields + 2 reserved (see the module documentation).
+            Self::Imu => 20,
+        }
+    }
+}
+
+/// The seed's STATUS `err` codes. Values fixed, never reused.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+#[repr(u16)]
+pub enum ErrorCode {
+    /// No error.
+    Ok = 0,
+    /// A frame failed its CRC.
+    CrcError = 1,
+    /// A payload had the wrong length for its MSG_ID.
+    LenError = 2,
+    /// MSG_ID not defined.
+    UnknownMsg = 3,
+    /// The IMU does not answer.
+    ImuFail = 4,
+}
+
+impl ErrorCode {
+    /// Maps a raw `err` value, `None` if undefined.
+    pub const fn from_raw(raw: u16) -> Option<Self> {
+        match raw {
+            0 => Some(Self::Ok),
+            1 => Some(Self::CrcError),
+            2 => Some(Self::LenError),
+            3 => Some(Self::UnknownMsg),
+            4 => Some(Self::ImuFail),
+            _ => None,
+        }
+    }
+}
+
+/// Why a frame or payload was refused. Wire codes fixed, never reused.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+#[repr(u8)]
+pub enum Error {
+    /// The CRC did not match.
+    Crc = 1,
+    /// The payload length is not the one fixed for the MSG_ID.
+    Length = 2,
+    /// The MSG_ID is not defined.
+    UnknownMsg = 3,
+    /// A field holds a value the seed does not define (e.g. `enable` = 2).
+    Value = 4,
+    /// Not a frame: bad SOF, or the bytes do not hold exactly one frame.
+    Framing = 5,
+}
+
+impl Error {
+    /// The safety core's view of this failure.
+    pub const fn reason(self) -> RejectReason {
+        match self {
+            Self::Crc => RejectReason::Crc,
+            Self::Framing => RejectReason::Framing,
+            Self::Length | Self::UnknownMsg | Self::Value => RejectReason::Decode,
+        }
+    }
+
+    /// The seed's STATUS `err` code that reports this failure.
+    pub const fn error_code(self) -> ErrorCode {
+        match self {
+            Self::Crc => ErrorCode::CrcError,
+            Self::Length | Self::Framing => ErrorCode::LenError,
+            Self::UnknownMsg | Self::Value => ErrorCode::UnknownMsg,
+        }
+    }
+}
+
+/// `SET_MOTOR_PWM` payload: four signed duties in [-1000, 1000] and a command timeout.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct SetMotorPwm {
+    /// pwm_m1 … pwm_m4 (TIM8 CH1 … CH4); the seed recommends [-1000, 1000].
+    pub pwm: [i16; 4],
+    /// Outputs go to zero if no new control frame arrives within this many milliseconds.
+    pub timeout_ms: u16,
+}
+
+/// Largest duty magnitude of `SET_MOTOR_PWM` (full scale).
+pub const PWM_FULL_SCALE: i16 = 1000;
+
+impl SetMotorPwm {
+    /// Duties clamped to ±[`PWM_FULL_SCALE`] (the seed's `min(|pwm|·ARR/1000, ARR)`).
+    pub fn duty(&self) -> [i16; 4] {
+        self.pwm
+            .map(|p| p.clamp(PWM_FULL_SCALE.saturating_neg(), PWM_FULL_SCALE))
+    }
+
+    /// The ladder's view: a raw-duty command, left = m1, right = m2 as a fraction of full scale.
+    /// The ladder refuses raw duty; see the module documentation.
+    pub fn to_command(&self) -> Command {
+        let [m1, m2, _, _] = self.duty();
+        Command {
+            left: f32::from(m1) / f32::from(PWM_FULL_SCALE),
+            right: f32::from(m2) / f32::from(PWM_FULL_SCALE),
+            mode: ControlMode::RawDuty as u32,
+            enable: true,
+            seq: None,
+        }
+    }
+}
+
+/// `IMU_MPU6050` payload: raw MPU6050 readings.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct Imu {
+    /// MCU milliseconds since power-on.
+    pub t_ms: u32,
+    /// Acceleration x, y, z in mg.
+    pub accel_mg: [i16; 3],
+    /// Angular rate x, y, z in mdps.
+    pub gyro_mdps: [i16; 3],
+    /// Temperature in 0.01 °C (0 if not measured).
+    pub temp_cdeg: i16,
+}
+
+/// `STATUS.flags` bits.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct StatusFlags(pub u16);
+
+impl StatusFlags {
+    /// bit 0: motors enabled.
+    pub const MOTOR_ENABLED: u16 = 1 << 0;
+    /// bit 1: emergency stop latched.
+    pub const ESTOP_LATCHED: u16 = 1 << 1;
+    /// bit 2: command timeout protection active.
+    pub const CMD_TIMEOUT: u16 = 1 << 2;
+    /// bit 3: IMU healthy.
+    pub const IMU_OK: u16 = 1 << 3;
+
+    /// True if every bit of `mask` is set.
+    pub const fn has(self, mask: u16) -> bool {
+        self.0 & mask == mask
+    }
+}
+
+/// `STATUS` payload.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct Status {
+    /// MCU milliseconds since power-on.
+    pub t_ms: u32,
+    /// Battery voltage in mV (0 if not measured).
+    pub vbat_mv: u16,
+    /// Status bits.
+    pub flags: StatusFlags,
+    /// Error code, raw (see [`ErrorCode::from_raw`]).
+    pub err: u16,
+}
+
+/// `ACK` payload.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct Ack {
+    /// The MSG_ID acknowledged.
+    pub msg_id: u8,
+    /// 0 OK, otherwise an error.
+    pub result: u8,
+}
+
+/// Every message of the seed.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum Message {
+    /// 0x01.
+    SetMotorPwm(SetMotorPwm),
+    /// 0x02: true = enable.
+    MotorEnable(bool),
+    /// 0x03.
+    Estop(Estop),
+    /// 0x10.
+    Ping,
+    /// 0x7F.
+    Ack(Ack),
+    /// 0x81.
+    Imu(Imu),
+    /// 0x82.
+    Status(Status),
+}
+
+impl Message {
+    /// This message's MSG_ID.
+    pub const fn id(&self) -> MsgId {
+        match self {
+            Self::SetMotorPwm(_) => MsgId::SetMotorPwm,
+            Self::MotorEnable(_) => MsgId::MotorEnable,
+            Self::Estop(_) => MsgId::Estop,
+            Self::Ping => MsgId::Ping,
+            Self::Ack(_) => MsgId::Ack,
+            Self::Imu(_) => MsgId::Imu,
+            Self::Status(_) => MsgId::Status,
+        }
+    }
+
+    /// Decodes a payload for a raw MSG_ID (the CRC already checked).
+    pub fn decode(msg_id: u8, payload: &[u8]) -> Result<Self, Error> {
+        let id = MsgId::from_raw(msg_id).ok_or(Error::UnknownMsg)?;
+        if payload.len() != id.payload_len() {
+            return Err(Error::Length);
+        }
+        let mut r = le::Reader::new(payload);
+        let short = |_| Error::Length;
+        let msg = match id {
+            MsgId::SetMotorPwm => Self::SetMotorPwm(SetMotorPwm {
+                pwm: [
+                    r.i16().map_err(short)?,
+                    r.i16().map_err(short)?,
+                    r.i16().map_err(short)?,
+                    r.i16().map_err(short)?,
+                ],
+                timeout_ms: r.u16().map_err(short)?,
+            }),
+            MsgId::MotorEnable => match r.u8().map_err(short)? {
+                0 => Self::MotorEnable(false),
+                1 => Self::MotorEnable(true),
+                _ => return Err(Error::Value),
+            },
+            MsgId::Estop => match r.u8().map_err(short)? {
+                0 => Self::Estop(Estop::Release),
+                1 => Self::Estop(Estop::Engage),
+                _ => return Err(Error::Value),
+            },
+            MsgId::Ping => Self::Ping,
+            MsgId::Ack => Self::Ack(Ack {
+                msg_id: r.u8().map_err(short)?,
+                result: r.u8().map_err(short)?,
+            }),
+            MsgId::Imu => Self::Imu(Imu {
+                t_ms: r.u32().map_err(short)?,
+                accel_mg: [
+                    r.i16().map_err(short)?,
+                    r.i16().map_err(short)?,
+                    r.i16().map_err(short)?,
+                ],
+                gyro_mdps: [
+                    r.i16().map_err(short)?,
+                    r.i16().map_err(short)?,
+                    r.i16().map_err(short)?,
+                ],
+                temp_cdeg: r.i16().map_err(short)?,
+            }),
+            MsgId::Status => Self::Status(Status {
+                t_ms: r.u32().map_err(short)?,
+                vbat_mv: r.u16().map_err(short)?,
+                flags: StatusFlags(r.u16().map_err(short)?),
+                err: r.u16().map_err(short)?,
+            }),
+        };
+        Ok(msg)
+    }
+
+    /// Writes the payload; returns its length.
+    pub fn encode_payload(&self, out: &mut [u8; MAX_PAYLOAD]) -> usize {
+        let mut w = le::Writer::new(out);
+        match self {
+            Self::SetMotorPwm(p) => {
+                for v in p.pwm {
+                    w.i16(v);
+                }
+                w.u16(p.timeout_ms);
+            }
+            Self::MotorEnable(on) => w.u8(u8::from(*on)),
+            Self::Estop(Estop::Engage) => w.u8(1),
+            Self::Estop(Estop::Release) => w.u8(0),
+            Self::Ping => {}
+            Self::Ack(a) => {
+                w.u8(a.msg_id);
+                w.u8(a.result);
+            }
+            Self::Imu(i) => {
+                w.u32(i.t_ms);
+                for v in i.accel_mg.into_iter().chain(i.gyro_mdps) {
+                    w.i16(v);
+                }
+                w.i16(i.temp_cdeg);
+                w.u16(0); // reserved
+            }
+            Self::Status(s) => {
+                w.u32(s.t_ms);
+                w.u16(s.vbat_mv);
+                w.u16(s.flags.0);
+                w.u16(s.err);
+            }
+        }
+        w.len()
+    }
+
+    /// Writes the complete frame (SOF, MSG_ID, LEN, payload, CRC); returns its length (6..=26).
+    pub fn encode(&self, out: &mut [u8; MAX_FRAME_LEN]) -> usize {
+        let mut payload = [0u8; MAX_PAYLOAD];
+        let n = self.encode_payload(&mut payload);
+        let body = payload.get(..n).unwrap_or(&[]);
+        encode_raw(self.id() as u8, body, out)
+    }
+
+    /// The ladder event this message asks for (see the module documentation), `None` for messages
+    /// that do not concern the ladder.
+    pub fn to_event(&self) -> Option<Event> {
+        match self {
+            Self::MotorEnable(true) => Some(Event::Rearm),
+            Self::MotorEnable(false) => Some(Event::Frame(Command {
+                left: 0.0,
+                right: 0.0,
+                mode: ControlMode::Idle as u32,
+                enable: false,
+                seq: None,
+            })),
+            Self::Estop(e) => Some(Event::Estop(*e)),
+            Self::SetMotorPwm(p) => Some(Event::Frame(p.to_command())),
+            Self::Ping | Self::Ack(_) | Self::Imu(_) | Self::Status(_) => None,
+        }
+    }
+}
+
+/// Frames any MSG_ID and payload (payloads longer than 255 bytes are cut at 255); returns the frame length.
+pub fn encode_raw(msg_id: u8, payload: &[u8], out: &mut [u8; MAX_FRAME_LEN]) -> usize {
+    let payload = payload.get(..MAX_PAYLOAD).unwrap_or(payload);
+    let len = u8::try_from(payload.len()).unwrap_or(u8::MAX);
+    let mut w = le::Writer::new(out);
+    w.bytes(&SOF);
+    w.u8(msg_id);
+    w.u8(len);
+    w.bytes(payload);
+    let n = w.len();
+    let crc = crc16::checksum(out.get(2..n).unwrap_or(&[]));
+    let mut w = le::Writer::new(out.get_mut(n..).unwrap_or(&mut []));
+    w.u16(crc);
+    n.saturating_add(w.len())
+}
+
+/// Decodes exactly one complete frame (`bytes` must be the frame and nothing else).
+///
+/// Checks: SOF and total length = 6 + LEN ([`Error::Framing`]), CRC ([`Error::Crc`]), then the payload.
+pub fn decode_frame(bytes: &[u8]) -> Result<Message, Error> {
+    let (header, rest) = bytes.split_at_checked(HEADER_LEN).ok_or(Error::Framing)?;
+    let [s0, s1, msg_id, len] = <[u8; HEADER_LEN]>::try_from(header).map_err(|_| Error::Framing)?;
+    if [s0, s1] != SOF || rest.len() != usize::from(len).saturating_add(CRC_LEN) {
+        return Err(Error::Framing);
+    }
+    let (payload, crc) = rest.split_at(usize::from(len));
+    let covered = bytes
+        .get(2..HEADER_LEN.saturating_add(usize::from(len)))
+        .ok_or(Error::Framing)?;
+    let stored = <[u8; 2]>::try_from(crc).map_err(|_| Error::Framing)?;
+    if crc16::checksum(covered) != u16::from_le_bytes(stored) {
+        return Err(Error::Crc);
+    }
+    Message::decode(msg_id, payload)
+}
+
+/// What a [`StreamDecoder`] has seen (saturating counters).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct Stats {
+    /// Frames delivered as messages.
+    pub frames: u32,
+    /// Frames whose CRC failed.
+    pub crc_errors: u32,
+    /// Frames with a good CRC but a bad payload (length, unknown MSG_ID, value).
+    pub message_errors: u32,
+    /// Bytes discarded while hunting for a start of frame (garbage, remains of broken frames, reset).
+    pub dropped_bytes: u32,
+}
+
+/// Turns a byte stream into messages; resynchronises after garbage, a false SOF inside a payload,
+/// a truncated frame or a bad CRC.
+///
+/// Bounded memory: one frame ([`MAX_FRAME_LEN`] bytes). On a CRC failure only the first SOF byte
+/// is discarded and the rest is scanned again, so a real frame that began inside the broken one
+/// (after a truncation or a false SOF) is still found. A frame whose CRC is good is consumed whole,
+/// even if its payload is refused.
+///
+/// ```text
+///  bytes:  .. 13 AA 55 01 0A [10 B] c c | AA 55 02 01 01 c c ..
+///          └dropped┘└──── frame ───────┘ └───── frame ─────┘
+/// ```
+#[derive(Clone, Debug, Default)]
+pub struct StreamDecoder {
+    buf: heapless::Vec<u8, MAX_FRAME_LEN>,
+    stats: Stats,
+}
+
+impl StreamDecoder {
+    /// An empty decoder.
+    pub const fn new() -> Self {
+        Self {
+            buf: heapless::Vec::new(),
+            stats: Stats {
+                frames: 0,
+                crc_errors: 0,
+                message_errors: 0,
+                dropped_bytes: 0,
+            },
+        }
+    }
+
+    /// Counters so far.
+    pub const fn stats(&self) -> Stats {
+        self.stats
+    }
+
+    /// Bytes held, waiting for the rest of a frame (at most [`MAX_FRAME_LEN`]).
+    pub fn buffered(&self) -> usize {
+        self.buf.len()
+    }
+
+    /// Discards a partial frame (e.g. after an inter-byte timeout), counting its bytes as dropped.
+    pub fn reset(&mut self) {
+        self.count_dropped(self.buf.len());
+        self.buf.clear();
+    }
+
+    /// Adds one byte; returns a message or an error if one completed.
+    ///
+    /// A byte can complete at most one result; after an error, call [`poll`](Self::poll) until it
+    /// returns `None` to collect frames already buffered (or use [`feed`](Self::feed)).
+    pub fn push(&mut self, byte: u8) -> Option<Result<Message, Error>> {
+        self.append(byte);
+        self.poll()
+    }
+
+    /// Returns the next result from bytes already buffered, without new input.
+    pub fn poll(&mut self) -> Option<Result<Message, Error>> {
+        loop {
+            match (self.buf.first(), self.buf.get(1)) {
+                (None, _) | (Some(0xAA), None) => return None,
+                (Some(0xAA), Some(0x55)) => {}
+                _ => {
+                    self.drop_front(1);
+                    self.count_dropped(1);
+                    continue;
+                }
+            }
+            let len = usize::from(*self.buf.get(3)?);
+            let need = HEADER_LEN.saturating_add(len).saturating_add(CRC_LEN);
+            let frame = self.buf.get(..need)?;
+            let result = decode_frame(frame);
+            match result {
+                Ok(_) => {
+                    self.stats.frames = self.stats.frames.saturating_add(1);
+                    self.drop_front(need);
+                }
+                Err(Error::Crc) => {
+                    // Maybe a false SOF: rescan from the next byte.
+                    self.stats.crc_errors = self.stats.crc_errors.saturating_add(1);
+                    self.drop_front(1);
+                    self.count_dropped(1);
+                }
+                Err(_) => {
+                    self.stats.message_errors = self.stats.message_errors.saturating_add(1);
+                    self.drop_front(need);
+                }
+            }
+            return Some(result);
+        }
+    }
+
+    /// Feeds a slice and iterates over every result it completes (buffered frames included).
+    pub fn feed<'a>(&'a mut self, bytes: &'a [u8]) -> Feed<'a> {
+        Feed { dec: self, bytes }
+    }
+
+    fn append(&mut self, byte: u8) {
+        if self.buf.is_full() {
+            // Unreachable while `poll` runs after every byte (a frame is complete at MAX_FRAME_LEN);
+            // kept so that no call order can make the decoder fail.
+            self.drop_front(1);
+            self.count_dropped(1);
+        }
+        let _ = self.buf.push(byte);
+    }
+
+    fn drop_front(&mut self, n: usize) {
+        let n = n.min(self.buf.len());
+        let keep = self.buf.len().saturating_sub(n);
+        self.buf.copy_within(n.., 0);
+        self.buf.truncate(keep);
+    }
+
+    fn count_dropped(&mut self, n: usize) {
+        let n = u32::try_from(n).unwrap_or(u32::MAX);
+        self.stats.dropped_bytes = self.stats.dropped_bytes.saturating_add(n);
+    }
+}
+
+/// Iterator returned by [`StreamDecoder::feed`].
+pub struct Feed<'a> {
+    dec: &'a mut StreamDecoder,
+    bytes: &'a [u8],
+}
+
+impl Iterator for Feed<'_> {
+    type Item = Result<Message, Error>;
+
+    fn next(&mut self) -> Option<Self::Item> {
+        loop {
+            if let Some(r) = self.dec.poll() {
+                return Some(r);
+            }
+            let (&b, rest) = self.bytes.split_first()?;
+            self.bytes = rest;
+            self.dec.append(b);
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests;
+
+#[cfg(any(test, kani))]
+mod verification;
