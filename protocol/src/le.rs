@@ -15,11 +15,6 @@ impl<'a> Reader<'a> {
         Self { rest: buf }
     }
 
-    /// Bytes not read yet.
-    pub(crate) fn remaining(&self) -> usize {
-        self.rest.len()
-    }
-
     fn array<const N: usize>(&mut self) -> Result<[u8; N], Short> {
         if self.rest.len() < N {
             return Err(Short);

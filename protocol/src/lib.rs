@@ -37,6 +37,8 @@ pub mod cdc;
 pub mod crc16;
 mod le;
 mod pb;
+pub mod pi_spi;
+pub mod teensy;
 
 use statemachine::{Event, RejectReason};
 

@@ -1,0 +1,182 @@
+//! Kani harnesses of the seed 004 buffers and their `cargo test` twins.
+
+use super::*;
+use statemachine::cover;
+use statemachine::harness::Source;
+
+fn any_motor_mode(src: &mut impl Source) -> MotorMode {
+    MotorMode::from_raw(src.below(5)).unwrap_or_default()
+}
+
+fn any_servo_mode(src: &mut impl Source) -> ServoMode {
+    ServoMode::from_raw(src.below(3)).unwrap_or_default()
+}
+
+fn f32x4(src: &mut impl Source) -> [f32; 4] {
+    [src.f32(), src.f32(), src.f32(), src.f32()]
+}
+
+fn i8x9(src: &mut impl Source) -> [i8; 9] {
+    let mut out = [0i8; 9];
+    for v in out.iter_mut() {
+        *v = src.u8() as i8;
+    }
+    out
+}
+
+pub(crate) fn any_rx(src: &mut impl Source) -> RxBuffer {
+    RxBuffer {
+        updates: UpdateFlags(src.u8() & UpdateFlags::ALL),
+        system_shutdown: Shutdown {
+            servos: src.bool(),
+            motors: src.bool(),
+        },
+        motor_control_mode: [
+            any_motor_mode(src),
+            any_motor_mode(src),
+            any_motor_mode(src),
+            any_motor_mode(src),
+        ],
+        motor_target: [src.i32(), src.i32(), src.i32(), src.i32()],
+        motor_goal_position: [src.i32(), src.i32(), src.i32(), src.i32()],
+        servo_mode: [
+            any_servo_mode(src),
+            any_servo_mode(src),
+            any_servo_mode(src),
+            any_servo_mode(src),
+        ],
+        servo_pos: [src.u16(), src.u16(), src.u16(), src.u16()],
+        motor_pid_settings: MotorPidSettings {
+            kp: f32x4(src),
+            ki: f32x4(src),
+            kd: f32x4(src),
+        },
+        imu_gyro_orientation: i8x9(src),
+        imu_compass_orientation: i8x9(src),
+        kinematics: KinematicsConfig {
+            inverse: [f32x4(src), f32x4(src), f32x4(src)],
+            ticks_to_rad: f32x4(src),
+        },
+    }
+}
+
+/// `decode_rx` and `decode_tx` return a buffer or a typed error for every input.
+pub(crate) fn check_decode_total(src: &mut impl Source) {
+    let mut rx = [0u8; RX_LEN];
+    if src.bool() {
+        for b in rx.iter_mut() {
+            *b = src.u8();
+        }
+    } else {
+        // A valid buffer with one of its first 41 bytes (the checked fields) replaced.
+        encode_rx(&any_rx(src), &mut rx);
+        let i = usize::from(src.below(41));
+        rx[i] = src.u8();
+    }
+    let r = decode_rx(&rx);
+    assert!(matches!(
+        r,
+        Ok(_) | Err(RejectReason::Version | RejectReason::Parity | RejectReason::Decode)
+    ));
+    let mut tx = [0u8; TX_LEN];
+    for b in tx.iter_mut() {
+        *b = src.u8();
+    }
+    let t = decode_tx(&tx);
+    assert!(matches!(t, Ok(_) | Err(RejectReason::Version)));
+    cover!(src, r.is_ok(), "rx decoded");
+    cover!(src, r == Err(RejectReason::Version), "rx version error");
+    cover!(src, r == Err(RejectReason::Parity), "rx parity error");
+    cover!(src, r == Err(RejectReason::Decode), "rx decode error");
+}
+
+/// encode → decode gives back the same buffers, bit for bit.
+pub(crate) fn check_round_trip(src: &mut impl Source) {
+    let rx = any_rx(src);
+    let mut b = [0u8; RX_LEN];
+    encode_rx(&rx, &mut b);
+    let d = decode_rx(&b);
+    // Compare the bytes of a re-encoding: floats then compare bit for bit (NaN included).
+    let mut again = [0u8; RX_LEN];
+    match d {
+        Ok(d) => encode_rx(&d, &mut again),
+        Err(_) => panic!("valid rx refused"),
+    }
+    assert!(b == again);
+    assert!(parity_ok(u32::from_le_bytes([b[1], b[2], b[3], b[4]])));
+    let mut tx = TxBuffer {
+        update_time: src.u32(),
+        ..Default::default()
+    };
+    tx.motor.bemf[0] = src.i32();
+    tx.imu.gyro.accuracy = src.u8() as i8;
+    tx.imu.heading = src.f32();
+    tx.odometry.wz = src.f32();
+    let mut t = [0u8; TX_LEN];
+    encode_tx(&tx, &mut t);
+    let mut t2 = [0u8; TX_LEN];
+    match decode_tx(&t) {
+        Ok(d) => encode_tx(&d, &mut t2),
+        Err(_) => panic!("valid tx refused"),
+    }
+    assert!(t == t2);
+    cover!(src, rx.updates.0.count_ones() % 2 == 0, "parity bit set");
+    cover!(src, rx.updates.0.count_ones() % 2 == 1, "parity bit clear");
+}
+
+/// A single flipped bit in the `updates` word is always caught by the parity check.
+pub(crate) fn check_updates_bit_flip_detected(src: &mut impl Source) {
+    let rx = any_rx(src);
+    let mut b = [0u8; RX_LEN];
+    encode_rx(&rx, &mut b);
+    let bit = usize::from(src.below(32));
+    b[1 + bit / 8] ^= 1 << (bit % 8);
+    assert_eq!(decode_rx(&b), Err(RejectReason::Parity));
+    cover!(src, bit == 7, "flip of the parity bit");
+    cover!(src, bit > 7, "flip of a reserved bit");
+}
+
+#[cfg(kani)]
+mod proofs {
+    use super::*;
+    use statemachine::harness::KaniSource;
+
+    #[kani::proof]
+    #[kani::unwind(180)]
+    fn verify_decode_total() {
+        check_decode_total(&mut KaniSource);
+    }
+
+    #[kani::proof]
+    #[kani::unwind(180)]
+    fn verify_round_trip() {
+        check_round_trip(&mut KaniSource);
+    }
+
+    #[kani::proof]
+    #[kani::unwind(180)]
+    fn verify_updates_bit_flip_detected() {
+        check_updates_bit_flip_detected(&mut KaniSource);
+    }
+}
+
+#[cfg(test)]
+mod twins {
+    use super::*;
+    use statemachine::harness::Twin;
+
+    #[test]
+    fn decode_total() {
+        Twin::run(0x5B_0001, 20_000, check_decode_total).assert_covered(4);
+    }
+
+    #[test]
+    fn round_trip() {
+        Twin::run(0x5B_0002, 10_000, check_round_trip).assert_covered(2);
+    }
+
+    #[test]
+    fn updates_bit_flip_detected() {
+        Twin::run(0x5B_0003, 10_000, check_updates_bit_flip_detected).assert_covered(2);
+    }
+}

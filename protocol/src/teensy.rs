@@ -1,0 +1,348 @@
+//! Seed 003: the Jetson ↔ Teensy serial packet, the legacy `\n`-delimited `CmdMsg` union and its COBS + CRC successor.
+//!
+//! # Legacy packet (compatibility)
+//!
+//! The C union `Packet { CmdMsg msg; char bytes[sizeof(CmdMsg) + 1]; }`, sent as raw bytes with
+//! `'\n'` (0x0A) in the last byte. On both ends (Teensy 3.2 Cortex-M4, Jetson aarch64) `int` and
+//! the enum are 32-bit little-endian and the struct has no padding:
+//!
+//! ```text
+//!  off       size  field
+//!    0         4   i32 cmd_type (0 MTRS, 1 CAL, 2 ENDEFF_ON, 3 ENDEFF_OFF, 4 CONFIG)
+//!    4         4   i32 is_relative
+//!    8       4·N   i32 mtr_angles[N]          (N = MAX_SUPPORTED_MTRS, a const generic here)
+//!    8+4N      4   i32 mtr_speed_deg_s
+//!   12+4N      4   i32 mtr_accel_deg_s_s
+//!   16+4N      4   i32 cmd_success            (set by the Teensy in its echo)
+//!   20+4N      1   '\n'
+//! ```
+//! The delimiter is not an escape: any field may contain 0x0A, so a receiver that splits on
+//! `'\n'` loses sync, and nothing detects corrupted bytes. [`CmdMsg::decode_legacy`] accepts only a
+//! packet of exactly the right length ending in `'\n'` ([`RejectReason::Framing`] otherwise).
+//!
+//! # Robust successor
+//!
+//! The same `CmdMsg` bytes behind a version byte and followed by a CRC, COBS-encoded, and ended by
+//! 0x00 (COBS leaves no other zero in the frame, so a receiver always resynchronises at the next 0x00):
+//!
+//! ```text
+//!  COBS( ROBUST_VERSION (1 B) | CmdMsg (20+4N B) | CRC-16/CCITT-FALSE LE over the previous bytes (2 B) ) | 0x00
+//! ```
+//! The Teensy echoes the command with `cmd_success` = 1 (done) or 0 (refused) in the same format
+//! ([`CmdMsg::reply`]). Checks on receipt: COBS structure and length → [`RejectReason::Framing`],
+//! CRC → [`RejectReason::Crc`], version → [`RejectReason::Version`], `cmd_type` → [`RejectReason::Decode`].
+//!
+//! # Mapping onto the safety core
+//!
+//! `CMDTYPE_MTRS` carries motor angles (a position command): [`CmdMsg::to_event`] maps motors 0 and
+//! 1 to a [`ControlMode::Position`] command, which the ladder refuses (it drives wheels by speed
+//! only); the other command types concern the arm and calibration and give no ladder event.
+
+use crate::crc16;
+use crate::le;
+use statemachine::{Command, ControlMode, Event, RejectReason};
+
+/// The largest motor count supported by the robust stream decoder's buffer.
+pub const MAX_MOTORS: usize = 16;
+/// Version byte of the robust successor frame.
+pub const ROBUST_VERSION: u8 = 1;
+/// The legacy delimiter.
+pub const DELIMITER: u8 = b'\n';
+
+/// Bytes of `CmdMsg` with `n` motors (`sizeof(CmdMsg)`).
+pub const fn msg_len(n: usize) -> usize {
+    4usize.saturating_mul(5usize.saturating_add(n))
+}
+
+/// Bytes of a legacy packet with `n` motors (`sizeof(Packet)`).
+pub const fn legacy_len(n: usize) -> usize {
+    msg_len(n).saturating_add(1)
+}
+
+/// Bytes before COBS of a robust frame with `n` motors: version, message, CRC.
+pub const fn robust_body_len(n: usize) -> usize {
+    msg_len(n).saturating_add(3)
+}
+
+/// Largest robust frame with `n` motors, COBS overhead and the 0x00 terminator included.
+pub const fn robust_max_len(n: usize) -> usize {
+    corncobs::max_encoded_len(robust_body_len(n))
+}
+
+/// The stream decoder's buffer: the largest robust frame of [`MAX_MOTORS`] motors.
+pub const ROBUST_BUF: usize = robust_max_len(MAX_MOTORS);
+
+/// Command types (`enum CmdType`, 32-bit on the wire). Values fixed by the seed.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+#[repr(i32)]
+pub enum CmdType {
+    /// Actuate the motors.
+    #[default]
+    Mtrs = 0,
+    /// Calibrate the motors.
+    Cal = 1,
+    /// End effector on.
+    EndeffOn = 2,
+    /// End effector off.
+    EndeffOff = 3,
+    /// Set speed / acceleration.
+    Config = 4,
+}
+
+impl CmdType {
+    /// Maps a raw value, `None` if undefined.
+    pub const fn from_raw(raw: i32) -> Option<Self> {
+        match raw {
+            0 => Some(Self::Mtrs),
+            1 => Some(Self::Cal),
+            2 => Some(Self::EndeffOn),
+            3 => Some(Self::EndeffOff),
+            4 => Some(Self::Config),
+            _ => None,
+        }
+    }
+}
+
+/// `struct CmdMsg` with `N` = `MAX_SUPPORTED_MTRS` motors.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct CmdMsg<const N: usize> {
+    /// What to do.
+    pub cmd_type: CmdType,
+    /// Non-zero: angles are relative to the current position.
+    pub is_relative: i32,
+    /// Target angle of each motor, degrees.
+    pub mtr_angles: [i32; N],
+    /// Speed, degrees per second.
+    pub mtr_speed_deg_s: i32,
+    /// Acceleration, degrees per second².
+    pub mtr_accel_deg_s_s: i32,
+    /// Set by the Teensy in its echo: 1 done, 0 not.
+    pub cmd_success: i32,
+}
+
+impl<const N: usize> Default for CmdMsg<N> {
+    fn default() -> Self {
+        Self {
+            cmd_type: CmdType::Mtrs,
+            is_relative: 0,
+            mtr_angles: [0; N],
+            mtr_speed_deg_s: 0,
+            mtr_accel_deg_s_s: 0,
+            cmd_success: 0,
+        }
+    }
+}
+
+impl<const N: usize> CmdMsg<N> {
+    /// `sizeof(CmdMsg)`.
+    pub const LEN: usize = msg_len(N);
+    /// `sizeof(Packet)`: the message and the `'\n'`.
+    pub const LEGACY_LEN: usize = legacy_len(N);
+    /// Largest robust frame, terminator included.
+    pub const ROBUST_MAX_LEN: usize = robust_max_len(N);
+    const FITS: () = assert!(N <= MAX_MOTORS, "more motors than MAX_MOTORS");
+
+    /// The echo the Teensy sends back: the same command with `cmd_success` set.
+    pub const fn reply(mut self, success: bool) -> Self {
+        self.cmd_success = success as i32;
+        self
+    }
+
+    /// Writes the `CmdMsg` bytes; `None` if `out` is shorter than [`Self::LEN`].
+    pub fn encode_raw(&self, out: &mut [u8]) -> Option<usize> {
+        let mut w = le::Writer::new(out);
+        w.i32(self.cmd_type as i32);
+        w.i32(self.is_relative);
+        for a in self.mtr_angles {
+            w.i32(a);
+        }
+        w.i32(self.mtr_speed_deg_s);
+        w.i32(self.mtr_accel_deg_s_s);
+        w.i32(self.cmd_success);
+        w.finish().ok()
+    }
+
+    /// Reads exactly [`Self::LEN`] bytes of `CmdMsg` (length → `Framing`, `cmd_type` → `Decode`).
+    pub fn decode_raw(bytes: &[u8]) -> Result<Self, RejectReason> {
+        if bytes.len() != Self::LEN {
+            return Err(RejectReason::Framing);
+        }
+        let mut r = le::Reader::new(bytes);
+        let short = |_| RejectReason::Framing;
+        let cmd_type = CmdType::from_raw(r.i32().map_err(short)?).ok_or(RejectReason::Decode)?;
+        let is_relative = r.i32().map_err(short)?;
+        let mut mtr_angles = [0i32; N];
+        for a in mtr_angles.iter_mut() {
+            *a = r.i32().map_err(short)?;
+        }
+        Ok(Self {
+            cmd_type,
+            is_relative,
+            mtr_angles,
+            mtr_speed_deg_s: r.i32().map_err(short)?,
+            mtr_accel_deg_s_s: r.i32().map_err(short)?,
+            cmd_success: r.i32().map_err(short)?,
+        })
+    }
+
+    /// Writes the legacy packet (message + `'\n'`); `None` if `out` is shorter than [`Self::LEGACY_LEN`].
+    pub fn encode_legacy(&self, out: &mut [u8]) -> Option<usize> {
+        let n = self.encode_raw(out)?;
+        let slot = out.get_mut(n)?;
+        *slot = DELIMITER;
+        Some(n.saturating_add(1))
+    }
+
+    /// Reads a legacy packet: exactly [`Self::LEGACY_LEN`] bytes ending in `'\n'`.
+    pub fn decode_legacy(packet: &[u8]) -> Result<Self, RejectReason> {
+        match packet.split_last() {
+            Some((&DELIMITER, msg)) => Self::decode_raw(msg),
+            _ => Err(RejectReason::Framing),
+        }
+    }
+
+    /// Writes the robust frame (COBS, 0x00 terminator included); `None` if `out` is shorter than
+    /// [`Self::ROBUST_MAX_LEN`].
+    pub fn encode_robust(&self, out: &mut [u8]) -> Option<usize> {
+        let () = Self::FITS;
+        let mut body = [0u8; robust_body_len(MAX_MOTORS)];
+        let body = body.get_mut(..robust_body_len(N))?;
+        let (version, rest) = body.split_first_mut()?;
+        *version = ROBUST_VERSION;
+        let n = self.encode_raw(rest)?;
+        let covered = n.saturating_add(1);
+        let crc = crc16::checksum(body.get(..covered)?);
+        body.get_mut(covered..)?.copy_from_slice(&crc.to_le_bytes());
+        let out = out.get_mut(..Self::ROBUST_MAX_LEN)?;
+        Some(corncobs::encode_buf(body, out))
+    }
+
+    /// Reads one robust frame: COBS bytes ending with the 0x00 terminator and containing no other zero.
+    pub fn decode_robust(frame: &[u8]) -> Result<Self, RejectReason> {
+        let () = Self::FITS;
+        // corncobs needs an output as long as the input; frames longer than ours are not ours.
+        if frame.len() > ROBUST_BUF || frame.last() != Some(&0) {
+            return Err(RejectReason::Framing);
+        }
+        let zeros = frame.iter().filter(|&&b| b == 0).count();
+        if zeros != 1 {
+            return Err(RejectReason::Framing);
+        }
+        let mut body = [0u8; ROBUST_BUF];
+        let out = body.get_mut(..frame.len()).ok_or(RejectReason::Framing)?;
+        let n = corncobs::decode_buf(frame, out).map_err(|_| RejectReason::Framing)?;
+        if n != robust_body_len(N) {
+            return Err(RejectReason::Framing);
+        }
+        let body = body.get(..n).ok_or(RejectReason::Framing)?;
+        let (covered, crc) = body.split_at(n.saturating_sub(2));
+        let stored = <[u8; 2]>::try_from(crc).map_err(|_| RejectReason::Framing)?;
+        if crc16::checksum(covered) != u16::from_le_bytes(stored) {
+            return Err(RejectReason::Crc);
+        }
+        match covered.split_first() {
+            Some((&ROBUST_VERSION, msg)) => Self::decode_raw(msg),
+            Some(_) => Err(RejectReason::Version),
+            None => Err(RejectReason::Framing),
+        }
+    }
+
+    /// The ladder event of this command (see the module documentation).
+    pub fn to_event(&self) -> Option<Event> {
+        match self.cmd_type {
+            CmdType::Mtrs => Some(Event::Frame(Command {
+                left: self.mtr_angles.first().copied().unwrap_or(0) as f32,
+                right: self.mtr_angles.get(1).copied().unwrap_or(0) as f32,
+                mode: ControlMode::Position as u32,
+                enable: true,
+                seq: None,
+            })),
+            CmdType::Cal | CmdType::EndeffOn | CmdType::EndeffOff | CmdType::Config => None,
+        }
+    }
+}
+
+/// What a [`RobustDecoder`] has seen (saturating counters).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct RobustStats {
+    /// Commands delivered.
+    pub frames: u32,
+    /// Frames refused (framing, CRC, version, decode).
+    pub errors: u32,
+    /// Bytes discarded because a frame grew past the buffer.
+    pub dropped_bytes: u32,
+}
+
+/// Splits a byte stream at 0x00 and decodes each robust frame; bounded to [`ROBUST_BUF`] bytes.
+#[derive(Clone, Debug)]
+pub struct RobustDecoder<const N: usize> {
+    buf: heapless::Vec<u8, ROBUST_BUF>,
+    overflow: bool,
+    stats: RobustStats,
+}
+
+impl<const N: usize> Default for RobustDecoder<N> {
+    fn default() -> Self {
+        Self::new()
+    }
+}
+
+impl<const N: usize> RobustDecoder<N> {
+    /// An empty decoder.
+    pub const fn new() -> Self {
+        let () = CmdMsg::<N>::FITS;
+        Self {
+            buf: heapless::Vec::new(),
+            overflow: false,
+            stats: RobustStats {
+                frames: 0,
+                errors: 0,
+                dropped_bytes: 0,
+            },
+        }
+    }
+
+    /// Counters so far.
+    pub const fn stats(&self) -> RobustStats {
+        self.stats
+    }
+
+    /// Adds one byte; at a 0x00 returns the frame's command or error (empty frames are ignored).
+    pub fn push(&mut self, byte: u8) -> Option<Result<CmdMsg<N>, RejectReason>> {
+        if byte != 0 {
+            if self.buf.len() >= CmdMsg::<N>::ROBUST_MAX_LEN.saturating_sub(1)
+                || self.buf.push(byte).is_err()
+            {
+                self.overflow = true;
+                self.stats.dropped_bytes = self.stats.dropped_bytes.saturating_add(1);
+            }
+            return None;
+        }
+        let overflow = core::mem::replace(&mut self.overflow, false);
+        if self.buf.is_empty() && !overflow {
+            return None;
+        }
+        let result = if overflow {
+            Err(RejectReason::Framing)
+        } else {
+            let _ = self.buf.push(0);
+            CmdMsg::<N>::decode_robust(&self.buf)
+        };
+        self.buf.clear();
+        if result.is_ok() {
+            self.stats.frames = self.stats.frames.saturating_add(1);
+        } else {
+            self.stats.errors = self.stats.errors.saturating_add(1);
+        }
+        Some(result)
+    }
+}
+
+#[cfg(test)]
+mod tests;
+
+#[cfg(any(test, kani))]
+mod verification;
