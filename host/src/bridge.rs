@@ -352,7 +352,12 @@ impl Bridge {
             Ok(fb) => fb,
             Err(reason) => {
                 self.stats.feedback_rejected = self.stats.feedback_rejected.saturating_add(1);
-                self.report(t_recv, Diagnostic::FeedbackRejected { reason: reason as u8 });
+                self.report(
+                    t_recv,
+                    Diagnostic::FeedbackRejected {
+                        reason: reason as u8,
+                    },
+                );
                 self.failed_in_row = self.failed_in_row.saturating_add(1);
                 if self.failed_in_row >= 5 && self.monitor.is_stale(t_recv) && !self.frozen {
                     self.frozen = true;
@@ -431,13 +436,23 @@ impl Bridge {
             ArmState::Armed if self.seen_running => {
                 self.state = ArmState::Latched;
                 self.out = [0.0; 2];
-                self.report(t_recv, Diagnostic::BrakeLatched { faults: sample.faults });
+                self.report(
+                    t_recv,
+                    Diagnostic::BrakeLatched {
+                        faults: sample.faults,
+                    },
+                );
             }
             ArmState::Armed => {
                 self.arm_wait = self.arm_wait.saturating_add(1);
                 if self.arm_wait > self.cfg.arm_timeout_cycles {
                     self.state = ArmState::Latched;
-                    self.report(t_recv, Diagnostic::ArmRefused { faults: sample.faults });
+                    self.report(
+                        t_recv,
+                        Diagnostic::ArmRefused {
+                            faults: sample.faults,
+                        },
+                    );
                 }
             }
             _ => {}
@@ -454,7 +469,11 @@ impl Bridge {
 }
 
 #[cfg(test)]
-#[allow(clippy::unwrap_used, clippy::indexing_slicing, clippy::arithmetic_side_effects)]
+#[allow(
+    clippy::unwrap_used,
+    clippy::indexing_slicing,
+    clippy::arithmetic_side_effects
+)]
 mod tests {
     use super::*;
     use statemachine::{Config, Event, Ladder};
@@ -525,7 +544,9 @@ mod tests {
         assert_eq!(b.state(), ArmState::Latched);
         assert_eq!(l.mode(), Mode::Brake);
         let d = b.drain();
-        assert!(d.iter().any(|(_, d)| matches!(d, Diagnostic::BrakeLatched { .. })));
+        assert!(d
+            .iter()
+            .any(|(_, d)| matches!(d, Diagnostic::BrakeLatched { .. })));
         // Still latched 1 s later: the bridge never re-arms by itself.
         for k in 100..1100u64 {
             exchange(&mut b, &mut l, k * 1000);

@@ -114,7 +114,11 @@ impl FeedbackMonitor {
         let mut out = Vec::new();
         self.checked = self.checked.saturating_add(1);
         let l = self.limits;
-        let finite = s.speed.iter().chain(s.current.iter()).all(|x| x.is_finite());
+        let finite = s
+            .speed
+            .iter()
+            .chain(s.current.iter())
+            .all(|x| x.is_finite());
         if !finite {
             self.note(&mut out, FeedbackFault::NonFinite);
         }
@@ -148,8 +152,8 @@ impl FeedbackMonitor {
                         let wrong_sign = w.abs() > l.direction_min_speed
                             && f64::from(w0).signum() == f64::from(w1).signum()
                             && dc * w.signum() < -l.count_slack;
-                        let wrong_size =
-                            (dc - expected).abs() > l.count_tolerance * expected.abs() + l.count_slack;
+                        let wrong_size = (dc - expected).abs()
+                            > l.count_tolerance * expected.abs() + l.count_slack;
                         if wrong_sign || wrong_size {
                             self.note(&mut out, FeedbackFault::EncoderInconsistent);
                         }
@@ -190,7 +194,11 @@ impl FeedbackMonitor {
 }
 
 #[cfg(test)]
-#[allow(clippy::unwrap_used, clippy::indexing_slicing, clippy::arithmetic_side_effects)]
+#[allow(
+    clippy::unwrap_used,
+    clippy::indexing_slicing,
+    clippy::arithmetic_side_effects
+)]
 mod tests {
     use super::*;
 
@@ -211,7 +219,11 @@ mod tests {
         let mut enc = 0i32;
         for k in 0..100u32 {
             enc += if k % 2 == 0 { 6 } else { 7 };
-            assert!(m.check(u64::from(k) * 1000, &sample(k, 10.0, enc)).is_empty(), "{k}");
+            assert!(
+                m.check(u64::from(k) * 1000, &sample(k, 10.0, enc))
+                    .is_empty(),
+                "{k}"
+            );
         }
     }
 
@@ -225,7 +237,9 @@ mod tests {
             .contains(&FeedbackFault::SpeedImplausible));
         let mut neg = sample(2, 10.0, 27);
         neg.current[1] = -0.5;
-        assert!(m.check(2000, &neg).contains(&FeedbackFault::NegativeCurrent));
+        assert!(m
+            .check(2000, &neg)
+            .contains(&FeedbackFault::NegativeCurrent));
         // Forward speed but counts going backwards by 50.
         assert!(m
             .check(3000, &sample(3, 10.0, -23))
@@ -242,7 +256,10 @@ mod tests {
         for t in 1..=5u64 {
             assert!(m.check(t * 1000, &sample(7, 0.0, 0)).is_empty(), "{t}");
         }
-        assert_eq!(m.check(6000, &sample(7, 0.0, 0)), vec![FeedbackFault::Stale]);
+        assert_eq!(
+            m.check(6000, &sample(7, 0.0, 0)),
+            vec![FeedbackFault::Stale]
+        );
         assert!(m.check(7000, &sample(8, 0.0, 0)).is_empty());
     }
 }

@@ -95,7 +95,9 @@ mod tests {
     fn a_silent_device_is_reported_frozen() {
         // The null device answers zeros: every feedback fails its CRC, nothing ever advances.
         let mut l = Link::new(
-            NullTransport { reply: vec![0; FRAME_LEN] },
+            NullTransport {
+                reply: vec![0; FRAME_LEN],
+            },
             Bridge::new(BridgeConfig::DEFAULT),
         );
         l.bridge.arm(0);

@@ -15,7 +15,11 @@ use sim::report;
 use sim::scenario::{self, Scenario};
 
 #[derive(Parser)]
-#[command(name = "motorlink", version, about = "Host side of the AMR motor controller: simulator, frame tools, device monitor")]
+#[command(
+    name = "motorlink",
+    version,
+    about = "Host side of the AMR motor controller: simulator, frame tools, device monitor"
+)]
 struct Cli {
     #[command(subcommand)]
     cmd: Cmd,
@@ -166,8 +170,7 @@ fn get<T: serde::de::DeserializeOwned + Default>(
 ) -> Result<T, String> {
     match v.get(key) {
         None => Ok(T::default()),
-        Some(x) => serde_json::from_value(x.clone())
-            .map_err(|e| format!("field '{key}': {e}")),
+        Some(x) => serde_json::from_value(x.clone()).map_err(|e| format!("field '{key}': {e}")),
     }
 }
 
@@ -178,7 +181,10 @@ fn decode(frame: Frame, hex: &str) -> Result<(), String> {
         Frame::AmrFeedback => amr::decode_feedback(&bytes).map(|f| feedback_json(&f)),
     }
     .map_err(|r| format!("frame refused: {r:?} (code {}); a CRC error means the capture is misaligned or corrupted", r as u8))?;
-    println!("{}", serde_json::to_string_pretty(&json).map_err(|e| e.to_string())?);
+    println!(
+        "{}",
+        serde_json::to_string_pretty(&json).map_err(|e| e.to_string())?
+    );
     Ok(())
 }
 
@@ -186,7 +192,9 @@ fn encode(frame: Frame, json: &str) -> Result<(), String> {
     let v: serde_json::Value =
         serde_json::from_str(json).map_err(|e| format!("not valid JSON: {e}"))?;
     if !v.is_object() {
-        return Err("give a JSON object, e.g. '{\"left_speed_cmd\": 1.0, \"enable\": true}'".into());
+        return Err(
+            "give a JSON object, e.g. '{\"left_speed_cmd\": 1.0, \"enable\": true}'".into(),
+        );
     }
     let mut out = [0u8; FRAME_LEN];
     match frame {
@@ -262,7 +270,10 @@ fn run_sim(
         .map_err(|e| format!("cannot create {}: {e}; choose another --out", out.display()))?;
     let mut results = Vec::new();
     for sc in &scenarios {
-        eprintln!("running {} ({} s simulated): {}", sc.name, sc.duration_s, sc.description);
+        eprintln!(
+            "running {} ({} s simulated): {}",
+            sc.name, sc.duration_s, sc.description
+        );
         let trace_path = out.join(format!("{}.csv", sc.name));
         let file = std::fs::File::create(&trace_path)
             .map_err(|e| format!("cannot write {}: {e}", trace_path.display()))?;
@@ -276,8 +287,12 @@ fn run_sim(
             .map_err(|e| format!("writing {}: {e}", trace_path.display()))?;
         if plots {
             let svg = out.join(format!("{}.svg", sc.name));
-            report::plot(&svg, &format!("{}: {}", sc.name, short(&sc.description)), &r)
-                .map_err(|e| format!("plot {}: {e}", svg.display()))?;
+            report::plot(
+                &svg,
+                &format!("{}: {}", sc.name, short(&sc.description)),
+                &r,
+            )
+            .map_err(|e| format!("plot {}: {e}", svg.display()))?;
         }
         let failures = r.summary.check(sc);
         results.push((r.summary, failures));
@@ -336,7 +351,10 @@ fn monitor(device: &str, kind: Kind, speed: u32, seconds: f64) -> Result<(), Str
         if now.saturating_sub(last_print) >= 100_000 {
             last_print = now;
             if let Some(fb) = link.bridge.last_feedback {
-                println!("{}", serde_json::json!({"t_us": now, "feedback": feedback_json(&fb)}));
+                println!(
+                    "{}",
+                    serde_json::json!({"t_us": now, "feedback": feedback_json(&fb)})
+                );
             }
         }
     }

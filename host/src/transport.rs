@@ -132,7 +132,10 @@ pub struct NullTransport {
 
 impl Transport for NullTransport {
     fn exchange(&mut self, _tx: &[u8], rx: &mut [u8]) -> Result<(), LinkError> {
-        for (d, s) in rx.iter_mut().zip(self.reply.iter().chain(std::iter::repeat(&0))) {
+        for (d, s) in rx
+            .iter_mut()
+            .zip(self.reply.iter().chain(std::iter::repeat(&0)))
+        {
             *d = *s;
         }
         Ok(())

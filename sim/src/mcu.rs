@@ -117,7 +117,10 @@ impl Mcu {
         let mut m = Self {
             p,
             ladder,
-            axes: [AxisLoop::new(&p.axis, counts[0]), AxisLoop::new(&p.axis, counts[1])],
+            axes: [
+                AxisLoop::new(&p.axis, counts[0]),
+                AxisLoop::new(&p.axis, counts[1]),
+            ],
             out,
             bridge: [BridgeDrive::Short; 2],
             duty: [0.0; 2],

@@ -184,7 +184,10 @@ impl Plant {
         let dw = ((force[1] - force[0]) * h - p.drag_w * self.w) / p.j_eff();
         let v_new = self.v + dv * dt;
         // Rolling resistance cannot reverse the motion within a step.
-        self.v = if self.v != 0.0 && v_new.signum() != self.v.signum() && (force[0] + force[1]).abs() < p.rolling_n {
+        self.v = if self.v != 0.0
+            && v_new.signum() != self.v.signum()
+            && (force[0] + force[1]).abs() < p.rolling_n
+        {
             0.0
         } else {
             v_new

@@ -30,7 +30,11 @@ pub const COLUMNS: [&str; 13] = [
 fn row(s: &Summary, failures: &[String]) -> Vec<String> {
     vec![
         s.name.clone(),
-        if failures.is_empty() { "PASS".into() } else { "FAIL".into() },
+        if failures.is_empty() {
+            "PASS".into()
+        } else {
+            "FAIL".into()
+        },
         opt(s.hold_ms, 1),
         opt(s.stop_ms, 1),
         opt(s.brake_ms, 1),
@@ -104,7 +108,13 @@ pub fn csv(results: &[(Summary, Vec<String>)]) -> String {
     let mut out = COLUMNS.iter().map(|c| esc(c)).collect::<Vec<_>>().join(",");
     for (s, f) in results {
         out.push('\n');
-        out.push_str(&row(s, f).iter().map(|c| esc(c)).collect::<Vec<_>>().join(","));
+        out.push_str(
+            &row(s, f)
+                .iter()
+                .map(|c| esc(c))
+                .collect::<Vec<_>>()
+                .join(","),
+        );
     }
     out.push('\n');
     out
@@ -196,7 +206,11 @@ pub fn plot(path: &Path, title: &str, r: &RunResult) -> Result<(), String> {
         )
         .build_cartesian_2d(t0..t1, -0.2f64..4.4f64)
         .map_err(e)?;
-    c.configure_mesh().x_desc("t (s)").y_labels(5).draw().map_err(e)?;
+    c.configure_mesh()
+        .x_desc("t (s)")
+        .y_labels(5)
+        .draw()
+        .map_err(e)?;
     c.draw_series(LineSeries::new(bucket_max(&s.mode), BLACK.stroke_width(2)))
         .map_err(e)?;
 
@@ -217,8 +231,11 @@ pub fn plot(path: &Path, title: &str, r: &RunResult) -> Result<(), String> {
     c.draw_series(LineSeries::new(bucket_max(&missed), BLUE.stroke_width(1)))
         .map_err(e)?;
     for (lvl, col) in [(2.0, RGBColor(200, 150, 0)), (10.0, RED)] {
-        c.draw_series(LineSeries::new(vec![(t0, lvl), (t1, lvl)], col.stroke_width(1)))
-            .map_err(e)?;
+        c.draw_series(LineSeries::new(
+            vec![(t0, lvl), (t1, lvl)],
+            col.stroke_width(1),
+        ))
+        .map_err(e)?;
     }
     root.present().map_err(|x| x.to_string())?;
     Ok(())

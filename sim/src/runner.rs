@@ -164,7 +164,10 @@ impl Summary {
         }
         if let Some(m) = e.moving_at_end {
             if (self.final_v.abs() > 0.1) != m {
-                bad.push(format!("moving at end: expected {m}, v = {:.3}", self.final_v));
+                bad.push(format!(
+                    "moving at end: expected {m}, v = {:.3}",
+                    self.final_v
+                ));
             }
         }
         for r in &e.host_reports {
@@ -327,7 +330,11 @@ pub fn run<H: HostModel>(
                         frozen_since = Some(t);
                     }
                 }
-                Fault::EncoderGlitch { at_s, wheel, counts } => {
+                Fault::EncoderGlitch {
+                    at_s,
+                    wheel,
+                    counts,
+                } => {
                     if t >= at_s && t < at_s + dt {
                         let k = wheel.index();
                         mcu.glitch[k] = mcu.glitch[k].wrapping_add(counts);
@@ -463,7 +470,11 @@ pub fn run<H: HostModel>(
                 if rng.chance(sc.host.preempt_rate) {
                     recv += 0.3e-3 + rng.uniform() * 2.7e-3;
                 }
-                let mut rx = if link_cut { [0u8; FRAME_LEN] } else { mcu.tx_buffer };
+                let mut rx = if link_cut {
+                    [0u8; FRAME_LEN]
+                } else {
+                    mcu.tx_buffer
+                };
                 if corrupt_feedback {
                     corrupt(&mut rx, &mut rng);
                 }

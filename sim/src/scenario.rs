@@ -316,7 +316,8 @@ impl Scenario {
     /// Reads and parses a scenario file.
     pub fn load(path: &std::path::Path) -> Result<Self, ScenarioError> {
         let origin = path.display().to_string();
-        let text = std::fs::read_to_string(path).map_err(|e| ScenarioError::Io(origin.clone(), e))?;
+        let text =
+            std::fs::read_to_string(path).map_err(|e| ScenarioError::Io(origin.clone(), e))?;
         Self::from_toml(&text, &origin)
     }
 
@@ -377,22 +378,48 @@ impl Scenario {
                 | Fault::Nav2Gap { at_s, .. } => Some(at_s),
                 Fault::Corruption { .. } | Fault::ClockDrift { .. } => None,
             })
-            .fold(None, |acc: Option<f64>, t| Some(acc.map_or(t, |a| a.min(t))))
+            .fold(None, |acc: Option<f64>, t| {
+                Some(acc.map_or(t, |a| a.min(t)))
+            })
     }
 }
 
 /// The built-in scenarios, embedded so `motorlink sim` works from any directory.
 pub const BUILTIN: [(&str, &str); 12] = [
     ("nominal", include_str!("../scenarios/nominal.toml")),
-    ("corruption-1e-4", include_str!("../scenarios/corruption-1e-4.toml")),
-    ("corruption-1e-3", include_str!("../scenarios/corruption-1e-3.toml")),
-    ("corruption-1e-2", include_str!("../scenarios/corruption-1e-2.toml")),
-    ("gc-pause-50ms", include_str!("../scenarios/gc-pause-50ms.toml")),
-    ("nav2-gap-100ms", include_str!("../scenarios/nav2-gap-100ms.toml")),
-    ("nav2-stall-300ms", include_str!("../scenarios/nav2-stall-300ms.toml")),
-    ("clock-drift-50ppm", include_str!("../scenarios/clock-drift-50ppm.toml")),
+    (
+        "corruption-1e-4",
+        include_str!("../scenarios/corruption-1e-4.toml"),
+    ),
+    (
+        "corruption-1e-3",
+        include_str!("../scenarios/corruption-1e-3.toml"),
+    ),
+    (
+        "corruption-1e-2",
+        include_str!("../scenarios/corruption-1e-2.toml"),
+    ),
+    (
+        "gc-pause-50ms",
+        include_str!("../scenarios/gc-pause-50ms.toml"),
+    ),
+    (
+        "nav2-gap-100ms",
+        include_str!("../scenarios/nav2-gap-100ms.toml"),
+    ),
+    (
+        "nav2-stall-300ms",
+        include_str!("../scenarios/nav2-stall-300ms.toml"),
+    ),
+    (
+        "clock-drift-50ppm",
+        include_str!("../scenarios/clock-drift-50ppm.toml"),
+    ),
     ("mcu-freeze", include_str!("../scenarios/mcu-freeze.toml")),
-    ("encoder-failure", include_str!("../scenarios/encoder-failure.toml")),
+    (
+        "encoder-failure",
+        include_str!("../scenarios/encoder-failure.toml"),
+    ),
     ("overcurrent", include_str!("../scenarios/overcurrent.toml")),
     ("estop-rearm", include_str!("../scenarios/estop-rearm.toml")),
 ];
