@@ -141,7 +141,7 @@ impl ClockSync {
         if t3_host < t1_host {
             return self.count(SampleOutcome::Invalid);
         }
-        let rtt = (t3_host - t1_host) as f64;
+        let rtt = t3_host.saturating_sub(t1_host) as f64;
         let mid = t1_host as f64 + rtt / 2.0;
         let sample = t2_mcu as f64 - mid;
         if !self.initialised {
@@ -194,7 +194,7 @@ impl ClockSync {
     /// Estimated MCU − host offset at host time `host`, µs.
     pub fn offset_at(&self, host: f64) -> Option<f64> {
         self.initialised
-            .then(|| self.offset + self.skew * (host - self.ref_host))
+            .then_some(self.offset + self.skew * (host - self.ref_host))
     }
 
     /// Estimated skew of the MCU clock against the host's, parts per million.
@@ -229,9 +229,9 @@ pub struct SeedClockSync {
 impl SeedClockSync {
     /// The seed's `update`.
     pub fn update(&mut self, t1_host: u64, t2_mcu: u64, t3_host: u64) {
-        let rtt = t3_host as i64 - t1_host as i64;
-        let mid = t1_host as i64 + rtt / 2;
-        let raw = mid - t2_mcu as i64;
+        let rtt = (t3_host as i64).saturating_sub(t1_host as i64);
+        let mid = (t1_host as i64).saturating_add(rtt / 2);
+        let raw = mid.saturating_sub(t2_mcu as i64);
         self.offset_us = (0.01 * raw as f64 + 0.99 * self.offset_us as f64) as i64;
     }
 
@@ -242,7 +242,11 @@ impl SeedClockSync {
 }
 
 #[cfg(test)]
-#[allow(clippy::unwrap_used, clippy::arithmetic_side_effects)]
+#[allow(
+    clippy::unwrap_used,
+    clippy::arithmetic_side_effects,
+    clippy::indexing_slicing
+)]
 mod tests {
     use super::*;
 

@@ -73,7 +73,9 @@ impl<T: Transport> Link<T> {
         duration: Duration,
         mut sink: impl FnMut(&[(u64, Diagnostic)]),
     ) -> Result<(), LinkError> {
-        let end = Instant::now() + duration;
+        let end = Instant::now()
+            .checked_add(duration)
+            .unwrap_or_else(Instant::now);
         while Instant::now() < end {
             let d = self.cycle()?;
             if !d.is_empty() {

@@ -127,11 +127,16 @@ fn parse_hex(s: &str) -> Result<Vec<u8>, String> {
     (0..clean.len())
         .step_by(2)
         .map(|i| {
-            let pair = clean.get(i..i + 2).unwrap_or("");
+            let pair = clean.get(i..i.saturating_add(2)).unwrap_or("");
             u8::from_str_radix(pair, 16)
                 .map_err(|_| format!("'{pair}' at position {i} is not a hex byte"))
         })
         .collect()
+}
+
+/// A duration from user input: negative or NaN is zero, too large is a year.
+fn secs(s: f64) -> Duration {
+    Duration::try_from_secs_f64(s.max(0.0)).unwrap_or(Duration::from_secs(365 * 24 * 3600))
 }
 
 fn to_hex(b: &[u8]) -> String {
@@ -341,7 +346,9 @@ fn monitor(device: &str, kind: Kind, speed: u32, seconds: f64) -> Result<(), Str
     let t = open(kind, device, speed)?;
     let mut link = Link::new(Boxed(t), Bridge::new(BridgeConfig::DEFAULT));
     let mut last_print = 0u64;
-    let end = std::time::Instant::now() + Duration::from_secs_f64(seconds.max(0.0));
+    let end = std::time::Instant::now()
+        .checked_add(secs(seconds))
+        .unwrap_or_else(std::time::Instant::now);
     while std::time::Instant::now() < end {
         let diags = link.cycle().map_err(|e| e.to_string())?;
         for (t, d) in diags {
@@ -408,7 +415,7 @@ fn loop_bench(seconds: f64) -> Result<(), String> {
         Bridge::new(BridgeConfig::DEFAULT),
     );
     link.pacer = Pacer::contract();
-    link.run_for(Duration::from_secs_f64(seconds.max(0.0)), |_| {})
+    link.run_for(secs(seconds), |_| {})
         .map_err(|e| e.to_string())?;
     let s = &link.pacer.stats;
     println!("{}", s.summary());

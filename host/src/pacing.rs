@@ -149,7 +149,9 @@ impl Pacer {
         Self {
             period,
             spin,
-            next: Instant::now() + period,
+            next: Instant::now()
+                .checked_add(period)
+                .unwrap_or_else(Instant::now),
             last_wake: None,
             stats: PeriodStats::new(CONTRACT_PERIOD, CONTRACT_TOLERANCE),
         }
@@ -163,6 +165,10 @@ impl Pacer {
     /// The deadline the next [`Pacer::wait`] returns at.
     pub fn next_deadline(&self) -> Instant {
         self.next
+    }
+
+    fn advance(&mut self) {
+        self.next = self.next.checked_add(self.period).unwrap_or(self.next);
     }
 
     /// Blocks until the next deadline, records the period since the previous wake-up and returns
@@ -182,10 +188,10 @@ impl Pacer {
                 .record_us(woke.duration_since(prev).as_secs_f64() * 1e6);
         }
         self.last_wake = Some(woke);
-        self.next += self.period;
+        self.advance();
         // Overran by more than a period: skip the missed deadlines rather than burst.
         while self.next <= woke {
-            self.next += self.period;
+            self.advance();
             self.stats.skipped = self.stats.skipped.saturating_add(1);
         }
         woke
@@ -193,7 +199,12 @@ impl Pacer {
 }
 
 #[cfg(test)]
-#[allow(clippy::unwrap_used, clippy::float_cmp)]
+#[allow(
+    clippy::unwrap_used,
+    clippy::float_cmp,
+    clippy::indexing_slicing,
+    clippy::arithmetic_side_effects
+)]
 mod tests {
     use super::*;
 

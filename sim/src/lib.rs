@@ -5,7 +5,11 @@
 //! Host-only code: indexing and arithmetic here are on fixed two-wheel arrays and floats of a
 //! model, and a panic would be a simulator bug, never a robot fault; the MCU-path crates it drives
 //! keep the workspace's strict lints.
-#![allow(clippy::indexing_slicing, clippy::arithmetic_side_effects)]
+#![allow(
+    clippy::indexing_slicing,
+    clippy::arithmetic_side_effects,
+    clippy::needless_range_loop
+)]
 
 pub mod host;
 pub mod mcu;

@@ -325,30 +325,26 @@ pub fn run<H: HostModel>(
         let mut estop = false;
         for f in &sc.faults {
             match *f {
-                Fault::McuFreeze { at_s, iwdg_ms } => {
-                    if frozen_since.is_none() && t >= at_s && t < at_s + iwdg_ms * 1e-3 {
-                        frozen_since = Some(t);
-                    }
+                Fault::McuFreeze { at_s, iwdg_ms }
+                    if frozen_since.is_none() && t >= at_s && t < at_s + iwdg_ms * 1e-3 =>
+                {
+                    frozen_since = Some(t);
                 }
                 Fault::EncoderGlitch {
                     at_s,
                     wheel,
                     counts,
-                } => {
-                    if t >= at_s && t < at_s + dt {
-                        let k = wheel.index();
-                        mcu.glitch[k] = mcu.glitch[k].wrapping_add(counts);
-                    }
+                } if t >= at_s && t < at_s + dt => {
+                    let k = wheel.index();
+                    mcu.glitch[k] = mcu.glitch[k].wrapping_add(counts);
                 }
                 Fault::Overcurrent {
                     at_s,
                     duration_s,
                     wheel,
                     amps,
-                } => {
-                    if in_window(t, at_s, duration_s) {
-                        overcurrent[wheel.index()] += amps;
-                    }
+                } if in_window(t, at_s, duration_s) => {
+                    overcurrent[wheel.index()] += amps;
                 }
                 Fault::Estop { at_s, release_s } => {
                     estop |= t >= at_s && t < release_s;

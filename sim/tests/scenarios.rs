@@ -159,6 +159,6 @@ fn estop_needs_the_rearm() {
     assert_eq!(s.rearms, 1);
     // Re-armed only after the operator's request at 3.5 s, never at the release (3.0 s).
     let t = first_report(&s, "rearmed");
-    assert!(t >= 3.5 && t < 3.52, "{t}");
+    assert!((3.5..3.52).contains(&t), "{t}");
     assert!(host.log.iter().all(|(_, d)| d.name() != "arm_refused"));
 }
