@@ -1,0 +1,584 @@
+//! The 1 kHz motor bridge (seed 000's `MotorBridge`, done properly), as a pure state machine:
+//! every method takes the host time in µs, so the robot and the simulator run the same code.
+//!
+//! ```text
+//!  cmd_vel (20 Hz) ──► target (v, ω) ──► IK ──► slew ≤ 0.04 rad/s per cycle ──► MotorCommand (1 kHz)
+//!        older than 200 ms ⇒ target 0                  enable = 0 unless Armed
+//!  feedback ──► checks (speed, current, encoder, staleness) ──► diagnostics; clock sync
+//!        MCU in BRAKE, or feedback stale ⇒ Latched: enable = 0, zero, wait for an explicit re-arm
+//! ```
+//!
+//! Arming follows the ladder's rule: a valid frame with enable = 0, then enable = 1 (the rising
+//! edge is the re-arm request), then fresh frames. The host never re-arms by itself.
+
+use protocol::amr::{MotorCommand, MotorFeedback};
+use statemachine::{ControlMode, FaultFlags, Mode, RejectReason};
+
+use crate::clocksync::{ClockSync, ClockSyncConfig, SeedClockSync};
+use crate::feedback::{FeedbackFault, FeedbackLimits, FeedbackMonitor, FeedbackSample};
+use crate::kinematics::DiffDrive;
+
+/// Bridge settings.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct BridgeConfig {
+    /// Robot geometry.
+    pub kinematics: DiffDrive,
+    /// cmd_vel older than this is replaced by zero, µs (seed: 200 ms).
+    pub cmd_vel_timeout_us: u64,
+    /// Largest change of a wheel command per cycle, rad/s (below the MCU's 0.05 per tick).
+    pub slew_per_cycle: f64,
+    /// Cycles with enable = 0 before enable = 1 when arming.
+    pub arm_cycles: u32,
+    /// Cycles to wait for the MCU to leave BRAKE after arming before giving up.
+    pub arm_timeout_cycles: u32,
+    /// Feedback limits.
+    pub limits: FeedbackLimits,
+    /// Clock sync tuning.
+    pub clock: ClockSyncConfig,
+    /// Duration of one SPI transfer, µs (the MCU stamps its feedback at the end of a transfer).
+    pub transfer_us: u64,
+    /// A gap between two of our own cycles longer than this is reported (HostLate), µs.
+    pub late_cycle_us: u64,
+}
+
+impl BridgeConfig {
+    /// Seed 000's figures on the default robot.
+    pub const DEFAULT: Self = Self {
+        kinematics: DiffDrive::DEFAULT,
+        cmd_vel_timeout_us: 200_000,
+        slew_per_cycle: 0.04,
+        arm_cycles: 3,
+        arm_timeout_cycles: 200,
+        limits: FeedbackLimits::DEFAULT,
+        clock: ClockSyncConfig::DEFAULT,
+        transfer_us: 256,
+        late_cycle_us: 2_000,
+    };
+}
+
+impl Default for BridgeConfig {
+    fn default() -> Self {
+        Self::DEFAULT
+    }
+}
+
+/// Where the bridge is in the arming sequence.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize)]
+pub enum ArmState {
+    /// Sending enable = 0; nothing asked.
+    Disarmed,
+    /// Sending enable = 0 for this many more cycles, then enable = 1.
+    Arming(u32),
+    /// Sending enable = 1 with the commanded speeds.
+    Armed,
+    /// The MCU braked (or froze): sending enable = 0, waiting for an explicit re-arm.
+    Latched,
+}
+
+/// Something the bridge reports (the fault/diagnostic stream).
+#[derive(Clone, Copy, Debug, PartialEq, serde::Serialize)]
+#[serde(tag = "diag", rename_all = "snake_case")]
+pub enum Diagnostic {
+    /// No cmd_vel for longer than the timeout: commanding zero.
+    CmdVelStale,
+    /// cmd_vel is fresh again.
+    CmdVelResumed,
+    /// A feedback frame failed to decode.
+    FeedbackRejected {
+        /// Why (ladder reject code).
+        reason: u8,
+    },
+    /// A feedback frame failed a plausibility check.
+    Feedback {
+        /// Which check.
+        fault: FeedbackFault,
+    },
+    /// MCU timestamps stopped advancing: MCU frozen. Commanding stop; re-arm needed.
+    McuFrozen,
+    /// The MCU is in BRAKE with these fault flags; re-arm needed.
+    BrakeLatched {
+        /// Fault flags reported.
+        faults: u16,
+    },
+    /// The MCU left BRAKE after an explicit re-arm.
+    Rearmed,
+    /// The MCU did not leave BRAKE after arming (a latching cause is still active).
+    ArmRefused {
+        /// Fault flags reported.
+        faults: u16,
+    },
+    /// The MCU's ladder changed rung.
+    Mode {
+        /// New rung (0 NORMAL … 4 BRAKE).
+        mode: u8,
+    },
+    /// Clock sync acquired.
+    ClockSynced,
+    /// The MCU did not accept the last command (its cmd_seq lags).
+    CommandNotAccepted,
+    /// Our own cycle came late (scheduling, GC pause): the MCU missed commands.
+    HostLate {
+        /// Time since the previous cycle, µs.
+        gap_us: u64,
+    },
+}
+
+impl Diagnostic {
+    /// Short stable name (used in traces and scenario expectations).
+    pub fn name(&self) -> &'static str {
+        match self {
+            Self::CmdVelStale => "cmd_vel_stale",
+            Self::CmdVelResumed => "cmd_vel_resumed",
+            Self::FeedbackRejected { .. } => "feedback_rejected",
+            Self::Feedback { fault } => match fault {
+                FeedbackFault::SpeedImplausible => "speed_implausible",
+                FeedbackFault::NegativeCurrent => "negative_current",
+                FeedbackFault::EncoderInconsistent => "encoder_inconsistent",
+                FeedbackFault::Stale => "feedback_stale",
+                FeedbackFault::NonFinite => "feedback_non_finite",
+            },
+            Self::McuFrozen => "mcu_frozen",
+            Self::BrakeLatched { .. } => "brake_latched",
+            Self::Rearmed => "rearmed",
+            Self::ArmRefused { .. } => "arm_refused",
+            Self::Mode { .. } => "mode",
+            Self::ClockSynced => "clock_synced",
+            Self::CommandNotAccepted => "command_not_accepted",
+            Self::HostLate { .. } => "host_late",
+        }
+    }
+}
+
+/// Counters of the bridge.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Serialize)]
+pub struct BridgeStats {
+    /// Commands built.
+    pub commands: u64,
+    /// Feedback frames decoded.
+    pub feedback_ok: u64,
+    /// Feedback frames refused by decoding.
+    pub feedback_rejected: u64,
+    /// Exchanges where the MCU had not accepted the previous command.
+    pub not_accepted: u64,
+}
+
+/// The bridge state.
+#[derive(Clone, Debug)]
+pub struct Bridge {
+    cfg: BridgeConfig,
+    state: ArmState,
+    cmd_vel: Option<(f64, f64, u64)>,
+    stale: bool,
+    out: [f64; 2],
+    seq: u32,
+    monitor: FeedbackMonitor,
+    /// Offset and skew estimator.
+    pub clock: ClockSync,
+    /// The seed's estimator, for comparison.
+    pub seed_clock: SeedClockSync,
+    /// (t_send, t_recv, seq) of the previous exchange.
+    prev_exchange: Option<(u64, u64, u32)>,
+    mcu_mode: Option<u8>,
+    seen_running: bool,
+    rearm_requested: bool,
+    arm_wait: u32,
+    frozen: bool,
+    synced: bool,
+    failed_in_row: u32,
+    last_command_us: Option<u64>,
+    diags: Vec<(u64, Diagnostic)>,
+    /// Last feedback decoded.
+    pub last_feedback: Option<MotorFeedback>,
+    /// Counters.
+    pub stats: BridgeStats,
+}
+
+fn approach(cur: f64, target: f64, step: f64) -> f64 {
+    if (target - cur).abs() <= step {
+        target
+    } else if target > cur {
+        cur + step
+    } else {
+        cur - step
+    }
+}
+
+impl Bridge {
+    /// A disarmed bridge.
+    pub fn new(cfg: BridgeConfig) -> Self {
+        Self {
+            cfg,
+            state: ArmState::Disarmed,
+            cmd_vel: None,
+            stale: false,
+            out: [0.0; 2],
+            seq: 0,
+            monitor: FeedbackMonitor::new(cfg.limits),
+            clock: ClockSync::new(cfg.clock),
+            seed_clock: SeedClockSync::default(),
+            prev_exchange: None,
+            mcu_mode: None,
+            seen_running: false,
+            rearm_requested: false,
+            arm_wait: 0,
+            frozen: false,
+            synced: false,
+            failed_in_row: 0,
+            last_command_us: None,
+            diags: Vec::new(),
+            last_feedback: None,
+            stats: BridgeStats::default(),
+        }
+    }
+
+    /// The arming state.
+    pub fn state(&self) -> ArmState {
+        self.state
+    }
+
+    /// The wheel speeds last commanded, rad/s.
+    pub fn output(&self) -> [f64; 2] {
+        self.out
+    }
+
+    fn report(&mut self, now: u64, d: Diagnostic) {
+        self.diags.push((now, d));
+    }
+
+    /// Takes the diagnostics raised since the last call.
+    pub fn drain(&mut self) -> Vec<(u64, Diagnostic)> {
+        core::mem::take(&mut self.diags)
+    }
+
+    /// A cmd_vel message (v m/s, ω rad/s) arrived at `now`.
+    pub fn cmd_vel(&mut self, now: u64, v: f64, w: f64) {
+        self.cmd_vel = Some((v, w, now));
+    }
+
+    /// Starts the arming sequence (from Disarmed or Latched).
+    pub fn arm(&mut self, now: u64) {
+        if matches!(self.state, ArmState::Disarmed | ArmState::Latched) {
+            self.rearm_requested = self.state == ArmState::Latched;
+            self.state = ArmState::Arming(self.cfg.arm_cycles);
+            self.out = [0.0; 2];
+            self.seen_running = false;
+            self.arm_wait = 0;
+            self.frozen = false;
+            self.monitor.reset(now);
+        }
+    }
+
+    /// Explicit re-arm after BRAKE (operator action); the same sequence as [`Bridge::arm`].
+    pub fn rearm(&mut self, now: u64) {
+        self.arm(now);
+    }
+
+    /// Disables the drive.
+    pub fn disarm(&mut self) {
+        self.state = ArmState::Disarmed;
+        self.out = [0.0; 2];
+    }
+
+    /// The command to send at `now`.
+    pub fn next_command(&mut self, now: u64) -> MotorCommand {
+        self.stats.commands = self.stats.commands.saturating_add(1);
+        self.monitor.start(now);
+        // Staleness is judged on feedback (a paused host must not blame the MCU); a late cycle
+        // of our own is reported as such.
+        if let Some(prev) = self.last_command_us {
+            let gap = now.saturating_sub(prev);
+            if gap > self.cfg.late_cycle_us {
+                self.report(now, Diagnostic::HostLate { gap_us: gap });
+            }
+        }
+        self.last_command_us = Some(now);
+        let fresh = self
+            .cmd_vel
+            .filter(|&(_, _, t)| now.saturating_sub(t) <= self.cfg.cmd_vel_timeout_us);
+        if fresh.is_none() && self.cmd_vel.is_some() && !self.stale {
+            self.stale = true;
+            self.report(now, Diagnostic::CmdVelStale);
+        } else if fresh.is_some() && self.stale {
+            self.stale = false;
+            self.report(now, Diagnostic::CmdVelResumed);
+        }
+        let enable = match self.state {
+            ArmState::Armed => true,
+            ArmState::Arming(0) => {
+                self.state = ArmState::Armed;
+                true
+            }
+            ArmState::Arming(n) => {
+                self.state = ArmState::Arming(n.saturating_sub(1));
+                false
+            }
+            ArmState::Disarmed | ArmState::Latched => false,
+        };
+        let target = match (enable, fresh) {
+            (true, Some((v, w, _))) => {
+                let (l, r) = self.cfg.kinematics.inverse(v, w);
+                [l, r]
+            }
+            _ => [0.0; 2],
+        };
+        if enable {
+            for (o, t) in self.out.iter_mut().zip(target) {
+                *o = approach(*o, t, self.cfg.slew_per_cycle);
+            }
+        } else {
+            self.out = [0.0; 2];
+        }
+        self.seq = self.seq.wrapping_add(1);
+        MotorCommand {
+            timestamp_us: now as u32,
+            left_speed_cmd: self.out[0] as f32,
+            right_speed_cmd: self.out[1] as f32,
+            control_mode: ControlMode::Speed as u32,
+            enable,
+            seq: self.seq,
+        }
+    }
+
+    /// The exchange that sent command `seq` at `t_send` completed at `t_recv` with `feedback`.
+    pub fn on_feedback(
+        &mut self,
+        t_send: u64,
+        t_recv: u64,
+        seq: u32,
+        feedback: Result<MotorFeedback, RejectReason>,
+    ) {
+        let prev = self.prev_exchange.replace((t_send, t_recv, seq));
+        let fb = match feedback {
+            Ok(fb) => fb,
+            Err(reason) => {
+                self.stats.feedback_rejected = self.stats.feedback_rejected.saturating_add(1);
+                self.report(
+                    t_recv,
+                    Diagnostic::FeedbackRejected {
+                        reason: reason as u8,
+                    },
+                );
+                self.failed_in_row = self.failed_in_row.saturating_add(1);
+                if self.failed_in_row >= 5 && self.monitor.is_stale(t_recv) && !self.frozen {
+                    self.frozen = true;
+                    self.report(t_recv, Diagnostic::McuFrozen);
+                    if self.state != ArmState::Disarmed {
+                        self.state = ArmState::Latched;
+                    }
+                }
+                return;
+            }
+        };
+        self.stats.feedback_ok = self.stats.feedback_ok.saturating_add(1);
+        self.failed_in_row = 0;
+        let repeated = self
+            .last_feedback
+            .is_some_and(|l| l.seq == fb.seq && l.timestamp_us == fb.timestamp_us);
+        self.last_feedback = Some(fb);
+        // The feedback was prepared when the previous exchange ended; pair it with that exchange
+        // only if the MCU accepted that exchange's command (cmd_seq), so the pairing is certain.
+        if let Some((p_send, p_recv, p_seq)) = prev {
+            if !repeated && fb.cmd_seq == p_seq {
+                let lo = p_send.saturating_add(self.cfg.transfer_us).min(p_recv);
+                self.clock.update(lo, u64::from(fb.timestamp_us), p_recv);
+                self.seed_clock
+                    .update(p_send, u64::from(fb.timestamp_us), p_recv);
+                if !self.synced && self.clock.is_synced(t_recv) {
+                    self.synced = true;
+                    self.report(t_recv, Diagnostic::ClockSynced);
+                }
+            } else if !repeated && self.state == ArmState::Armed && self.seen_running {
+                self.stats.not_accepted = self.stats.not_accepted.saturating_add(1);
+            }
+        }
+        let sample = FeedbackSample {
+            mcu_us: fb.timestamp_us,
+            speed: [fb.left_speed, fb.right_speed],
+            current: [fb.left_current, fb.right_current],
+            encoder: [fb.left_encoder, fb.right_encoder],
+            faults: u16::try_from(fb.fault_flags).unwrap_or(u16::MAX),
+        };
+        if self.frozen && !repeated && !self.monitor.is_stale(t_recv) {
+            // Timestamps advance again (the MCU restarted): stays Latched until re-armed.
+            self.frozen = false;
+            self.monitor.reset(t_recv);
+        }
+        for f in self.monitor.check(t_recv, &sample) {
+            if f == FeedbackFault::Stale {
+                if !self.frozen {
+                    self.frozen = true;
+                    self.report(t_recv, Diagnostic::McuFrozen);
+                    if self.state != ArmState::Disarmed {
+                        self.state = ArmState::Latched;
+                    }
+                }
+            } else {
+                self.report(t_recv, Diagnostic::Feedback { fault: f });
+            }
+        }
+        if repeated {
+            return;
+        }
+        let mode = u8::try_from(fb.mode).unwrap_or(u8::MAX);
+        if self.mcu_mode != Some(mode) {
+            self.mcu_mode = Some(mode);
+            self.report(t_recv, Diagnostic::Mode { mode });
+        }
+        let braked = mode == Mode::Brake as u8;
+        match self.state {
+            ArmState::Armed if !braked => {
+                if !self.seen_running && self.rearm_requested {
+                    self.report(t_recv, Diagnostic::Rearmed);
+                }
+                self.seen_running = true;
+                self.rearm_requested = false;
+            }
+            ArmState::Armed if self.seen_running => {
+                self.state = ArmState::Latched;
+                self.out = [0.0; 2];
+                self.report(
+                    t_recv,
+                    Diagnostic::BrakeLatched {
+                        faults: sample.faults,
+                    },
+                );
+            }
+            ArmState::Armed => {
+                self.arm_wait = self.arm_wait.saturating_add(1);
+                if self.arm_wait > self.cfg.arm_timeout_cycles {
+                    self.state = ArmState::Latched;
+                    self.report(
+                        t_recv,
+                        Diagnostic::ArmRefused {
+                            faults: sample.faults,
+                        },
+                    );
+                }
+            }
+            _ => {}
+        }
+    }
+
+    /// True if the MCU reported BRAKE latched in its last feedback.
+    pub fn mcu_brake_latched(&self) -> bool {
+        self.last_feedback.is_some_and(|f| {
+            FaultFlags(u16::try_from(f.fault_flags).unwrap_or(u16::MAX))
+                .contains(FaultFlags::BRAKE_LATCHED)
+        })
+    }
+}
+
+#[cfg(test)]
+#[allow(
+    clippy::unwrap_used,
+    clippy::indexing_slicing,
+    clippy::arithmetic_side_effects
+)]
+mod tests {
+    use super::*;
+    use statemachine::{Config, Event, Ladder};
+
+    /// Drives a real ladder with the bridge's commands (no plant): one command per tick.
+    fn exchange(b: &mut Bridge, l: &mut Ladder, now: u64) -> MotorCommand {
+        let c = b.next_command(now);
+        l.step(Event::Frame(protocol::amr::MotorCommand::to_command(&c)));
+        let out = l.step(Event::Tick);
+        let fb = MotorFeedback {
+            timestamp_us: now as u32 + 7,
+            seq: (now / 1000) as u32,
+            cmd_seq: c.seq,
+            ..MotorFeedback::default()
+        }
+        .with_output(&out);
+        b.on_feedback(now, now + 300, c.seq, Ok(fb));
+        c
+    }
+
+    #[test]
+    fn arms_the_real_ladder_and_ramps_within_its_limit() {
+        let mut b = Bridge::new(BridgeConfig::DEFAULT);
+        let mut l = Ladder::new(Config::DEFAULT);
+        b.arm(0);
+        let mut last = 0.0f32;
+        for k in 0..600u64 {
+            b.cmd_vel(k * 1000, 1.0, 0.0);
+            let c = exchange(&mut b, &mut l, k * 1000);
+            assert!((c.left_speed_cmd - last).abs() <= 0.0401, "slew at {k}");
+            last = c.left_speed_cmd;
+        }
+        assert_eq!(b.state(), ArmState::Armed);
+        assert_ne!(l.mode(), Mode::Brake);
+        // 1 m/s on 0.08 m wheels = 12.5 rad/s, reached after 12.5 / 0.04 ≈ 313 cycles.
+        assert!((last - 12.5).abs() < 1e-3, "{last}");
+        // No frame was refused by the ladder's acceleration check.
+        assert_eq!(l.counters().rejected_total(), 0);
+    }
+
+    #[test]
+    fn stale_cmd_vel_commands_zero() {
+        let mut b = Bridge::new(BridgeConfig::DEFAULT);
+        let mut l = Ladder::new(Config::DEFAULT);
+        b.arm(0);
+        b.cmd_vel(0, 0.5, 0.0);
+        for k in 0..400u64 {
+            exchange(&mut b, &mut l, k * 1000);
+        }
+        // cmd_vel is 400 ms old: the target is zero and the output has ramped down.
+        assert_eq!(b.output(), [0.0, 0.0]);
+        assert!(b.drain().iter().any(|(_, d)| *d == Diagnostic::CmdVelStale));
+    }
+
+    #[test]
+    fn brake_latches_and_needs_explicit_rearm() {
+        let mut b = Bridge::new(BridgeConfig::DEFAULT);
+        let mut l = Ladder::new(Config::DEFAULT);
+        b.arm(0);
+        for k in 0..50u64 {
+            exchange(&mut b, &mut l, k * 1000);
+        }
+        l.step(Event::Estop(statemachine::Estop::Engage));
+        l.step(Event::Estop(statemachine::Estop::Release));
+        for k in 50..100u64 {
+            exchange(&mut b, &mut l, k * 1000);
+        }
+        assert_eq!(b.state(), ArmState::Latched);
+        assert_eq!(l.mode(), Mode::Brake);
+        let d = b.drain();
+        assert!(d
+            .iter()
+            .any(|(_, d)| matches!(d, Diagnostic::BrakeLatched { .. })));
+        // Still latched 1 s later: the bridge never re-arms by itself.
+        for k in 100..1100u64 {
+            exchange(&mut b, &mut l, k * 1000);
+        }
+        assert_eq!(l.mode(), Mode::Brake);
+        b.rearm(1_100_000);
+        for k in 1100..1120u64 {
+            exchange(&mut b, &mut l, k * 1000);
+        }
+        assert_ne!(l.mode(), Mode::Brake);
+        assert!(b.drain().iter().any(|(_, d)| *d == Diagnostic::Rearmed));
+    }
+
+    #[test]
+    fn frozen_feedback_stops_and_reports() {
+        let mut b = Bridge::new(BridgeConfig::DEFAULT);
+        let mut l = Ladder::new(Config::DEFAULT);
+        b.arm(0);
+        for k in 0..100u64 {
+            b.cmd_vel(k * 1000, 0.5, 0.0);
+            exchange(&mut b, &mut l, k * 1000);
+        }
+        let frozen = b.last_feedback.unwrap();
+        for k in 100..110u64 {
+            b.cmd_vel(k * 1000, 0.5, 0.0);
+            let c = b.next_command(k * 1000);
+            b.on_feedback(k * 1000, k * 1000 + 300, c.seq, Ok(frozen));
+        }
+        assert_eq!(b.state(), ArmState::Latched);
+        let c = b.next_command(111_000);
+        assert!(!c.enable);
+        assert_eq!(c.left_speed_cmd, 0.0);
+        assert!(b.drain().iter().any(|(_, d)| *d == Diagnostic::McuFrozen));
+    }
+}

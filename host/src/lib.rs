@@ -1,0 +1,21 @@
+//! Linux host side of the motor controller: byte transports (spidev, serial / USB CDC), the 1 kHz
+//! bridge with absolute-deadline pacing, inverse kinematics, feedback validation, clock sync, and
+//! the simulator's host model.
+//!
+//! All encoding is done by the `protocol` crate; the bridge is a pure state machine driven with
+//! explicit times, so the simulator (`sim`) runs exactly this code against the simulated MCU.
+
+pub mod bridge;
+pub mod clocksync;
+pub mod feedback;
+pub mod kinematics;
+pub mod link;
+pub mod pacing;
+pub mod simhost;
+pub mod transport;
+
+pub use bridge::{ArmState, Bridge, BridgeConfig, Diagnostic};
+pub use clocksync::{ClockSync, ClockSyncConfig};
+pub use kinematics::DiffDrive;
+pub use simhost::SimHost;
+pub use transport::{LinkError, Transport};

@@ -1,0 +1,480 @@
+//! `motorlink`: run the simulator, decode/encode frames, monitor and ping a real MCU.
+
+use std::path::{Path, PathBuf};
+use std::process::ExitCode;
+use std::time::Duration;
+
+use clap::{Parser, Subcommand, ValueEnum};
+use motorlink::bridge::{Bridge, BridgeConfig};
+use motorlink::link::Link;
+use motorlink::pacing::Pacer;
+use motorlink::transport::{NullTransport, SerialTransport, SpiTransport, Transport};
+use motorlink::SimHost;
+use protocol::amr::{self, MotorCommand, MotorFeedback, FRAME_LEN};
+use sim::report;
+use sim::scenario::{self, Scenario};
+
+#[derive(Parser)]
+#[command(
+    name = "motorlink",
+    version,
+    about = "Host side of the AMR motor controller: simulator, frame tools, device monitor"
+)]
+struct Cli {
+    #[command(subcommand)]
+    cmd: Cmd,
+}
+
+#[derive(Clone, Copy, ValueEnum)]
+enum Frame {
+    /// Seed 000 SPI command frame (Jetson → MCU), 64 bytes.
+    AmrCommand,
+    /// Seed 000 SPI feedback frame (MCU → Jetson), 64 bytes.
+    AmrFeedback,
+}
+
+#[derive(Clone, Copy, ValueEnum)]
+enum Kind {
+    /// Linux spidev (seed 000), 2 MHz mode 0.
+    Spi,
+    /// Serial / USB CDC.
+    Serial,
+}
+
+#[derive(Subcommand)]
+enum Cmd {
+    /// Run the built-in scenarios (or the given scenario files) and write traces, table and plots.
+    Sim {
+        /// Scenario files (TOML) or built-in names; default: every built-in scenario.
+        scenarios: Vec<String>,
+        /// Output directory.
+        #[arg(long, default_value = "out/sim")]
+        out: PathBuf,
+        /// Override each scenario's duration, s.
+        #[arg(long)]
+        duration: Option<f64>,
+        /// Skip the SVG plots.
+        #[arg(long)]
+        no_plots: bool,
+        /// List the built-in scenarios and exit.
+        #[arg(long)]
+        list: bool,
+    },
+    /// Decode one frame (hex, spaces allowed) to JSON.
+    Decode {
+        /// Frame type.
+        #[arg(long, value_enum)]
+        frame: Frame,
+        /// The bytes in hex (e.g. from a logic-analyser capture).
+        hex: String,
+    },
+    /// Encode a JSON message to a frame in hex.
+    Encode {
+        /// Frame type.
+        #[arg(long, value_enum)]
+        frame: Frame,
+        /// The message as JSON (field names as `decode` prints them).
+        json: String,
+    },
+    /// Run the 1 kHz bridge disarmed against a device and print feedback and diagnostics.
+    Monitor {
+        /// Device path (/dev/spidev0.0 or /dev/ttyACM0).
+        device: String,
+        /// Link kind.
+        #[arg(long, value_enum, default_value = "spi")]
+        kind: Kind,
+        /// SPI clock (Hz) or baud rate.
+        #[arg(long, default_value_t = 2_000_000)]
+        speed: u32,
+        /// How long, s.
+        #[arg(long, default_value_t = 5.0)]
+        seconds: f64,
+    },
+    /// Exchange a few frames with a device and report round trip and clock offset.
+    Ping {
+        /// Device path.
+        device: String,
+        /// Link kind.
+        #[arg(long, value_enum, default_value = "spi")]
+        kind: Kind,
+        /// SPI clock (Hz) or baud rate.
+        #[arg(long, default_value_t = 2_000_000)]
+        speed: u32,
+        /// Exchanges.
+        #[arg(long, default_value_t = 10)]
+        count: u32,
+    },
+    /// Measure the 1 kHz loop's period and deadline misses on this machine (no device needed).
+    LoopBench {
+        /// How long, s.
+        #[arg(long, default_value_t = 60.0)]
+        seconds: f64,
+    },
+}
+
+fn parse_hex(s: &str) -> Result<Vec<u8>, String> {
+    let clean: String = s
+        .chars()
+        .filter(|c| !c.is_whitespace() && *c != ':' && *c != ',')
+        .collect();
+    let clean = clean.strip_prefix("0x").unwrap_or(&clean);
+    if clean.len() % 2 != 0 {
+        return Err(format!(
+            "hex input has an odd number of digits ({}); give two digits per byte",
+            clean.len()
+        ));
+    }
+    (0..clean.len())
+        .step_by(2)
+        .map(|i| {
+            let pair = clean.get(i..i.saturating_add(2)).unwrap_or("");
+            u8::from_str_radix(pair, 16)
+                .map_err(|_| format!("'{pair}' at position {i} is not a hex byte"))
+        })
+        .collect()
+}
+
+/// A duration from user input: negative or NaN is zero, too large is a year.
+fn secs(s: f64) -> Duration {
+    Duration::try_from_secs_f64(s.max(0.0)).unwrap_or(Duration::from_secs(365 * 24 * 3600))
+}
+
+fn to_hex(b: &[u8]) -> String {
+    b.iter().map(|x| format!("{x:02x}")).collect()
+}
+
+fn frame_array(bytes: &[u8]) -> Result<[u8; FRAME_LEN], String> {
+    <[u8; FRAME_LEN]>::try_from(bytes).map_err(|_| {
+        format!(
+            "an AMR frame is exactly {FRAME_LEN} bytes, got {}; capture one whole CS-low period",
+            bytes.len()
+        )
+    })
+}
+
+fn command_json(c: &MotorCommand) -> serde_json::Value {
+    serde_json::json!({
+        "timestamp_us": c.timestamp_us, "left_speed_cmd": c.left_speed_cmd,
+        "right_speed_cmd": c.right_speed_cmd, "control_mode": c.control_mode,
+        "enable": c.enable, "seq": c.seq,
+    })
+}
+
+fn feedback_json(f: &MotorFeedback) -> serde_json::Value {
+    serde_json::json!({
+        "timestamp_us": f.timestamp_us, "left_speed": f.left_speed, "right_speed": f.right_speed,
+        "left_current": f.left_current, "right_current": f.right_current,
+        "left_encoder": f.left_encoder, "right_encoder": f.right_encoder,
+        "fault_flags": f.fault_flags, "seq": f.seq, "mode": f.mode, "cmd_seq": f.cmd_seq,
+    })
+}
+
+fn get<T: serde::de::DeserializeOwned + Default>(
+    v: &serde_json::Value,
+    key: &str,
+) -> Result<T, String> {
+    match v.get(key) {
+        None => Ok(T::default()),
+        Some(x) => serde_json::from_value(x.clone()).map_err(|e| format!("field '{key}': {e}")),
+    }
+}
+
+fn decode(frame: Frame, hex: &str) -> Result<(), String> {
+    let bytes = frame_array(&parse_hex(hex)?)?;
+    let json = match frame {
+        Frame::AmrCommand => amr::decode_command(&bytes).map(|c| command_json(&c)),
+        Frame::AmrFeedback => amr::decode_feedback(&bytes).map(|f| feedback_json(&f)),
+    }
+    .map_err(|r| format!("frame refused: {r:?} (code {}); a CRC error means the capture is misaligned or corrupted", r as u8))?;
+    println!(
+        "{}",
+        serde_json::to_string_pretty(&json).map_err(|e| e.to_string())?
+    );
+    Ok(())
+}
+
+fn encode(frame: Frame, json: &str) -> Result<(), String> {
+    let v: serde_json::Value =
+        serde_json::from_str(json).map_err(|e| format!("not valid JSON: {e}"))?;
+    if !v.is_object() {
+        return Err(
+            "give a JSON object, e.g. '{\"left_speed_cmd\": 1.0, \"enable\": true}'".into(),
+        );
+    }
+    let mut out = [0u8; FRAME_LEN];
+    match frame {
+        Frame::AmrCommand => {
+            let c = MotorCommand {
+                timestamp_us: get(&v, "timestamp_us")?,
+                left_speed_cmd: get(&v, "left_speed_cmd")?,
+                right_speed_cmd: get(&v, "right_speed_cmd")?,
+                control_mode: get(&v, "control_mode")?,
+                enable: get(&v, "enable")?,
+                seq: get(&v, "seq")?,
+            };
+            amr::encode_command(&c, &mut out);
+        }
+        Frame::AmrFeedback => {
+            let f = MotorFeedback {
+                timestamp_us: get(&v, "timestamp_us")?,
+                left_speed: get(&v, "left_speed")?,
+                right_speed: get(&v, "right_speed")?,
+                left_current: get(&v, "left_current")?,
+                right_current: get(&v, "right_current")?,
+                left_encoder: get(&v, "left_encoder")?,
+                right_encoder: get(&v, "right_encoder")?,
+                fault_flags: get(&v, "fault_flags")?,
+                seq: get(&v, "seq")?,
+                mode: get(&v, "mode")?,
+                cmd_seq: get(&v, "cmd_seq")?,
+            };
+            amr::encode_feedback(&f, &mut out);
+        }
+    }
+    println!("{}", to_hex(&out));
+    Ok(())
+}
+
+fn load_scenarios(args: &[String]) -> Result<Vec<Scenario>, String> {
+    if args.is_empty() {
+        return scenario::builtin().map_err(|e| e.to_string());
+    }
+    args.iter()
+        .map(|a| {
+            if let Some((_, text)) = scenario::BUILTIN.iter().find(|(n, _)| n == a) {
+                Scenario::from_toml(text, a).map_err(|e| e.to_string())
+            } else if Path::new(a).exists() {
+                Scenario::load(Path::new(a)).map_err(|e| e.to_string())
+            } else {
+                let names: Vec<&str> = scenario::BUILTIN.iter().map(|(n, _)| *n).collect();
+                Err(format!(
+                    "'{a}' is neither a scenario file nor a built-in scenario ({})",
+                    names.join(", ")
+                ))
+            }
+        })
+        .collect()
+}
+
+fn run_sim(
+    args: &[String],
+    out: &Path,
+    duration: Option<f64>,
+    plots: bool,
+) -> Result<bool, String> {
+    let mut scenarios = load_scenarios(args)?;
+    if let Some(d) = duration {
+        if !(d.is_finite() && d > 0.0) {
+            return Err("--duration must be a positive number of seconds".into());
+        }
+        for s in &mut scenarios {
+            s.duration_s = d;
+        }
+    }
+    std::fs::create_dir_all(out)
+        .map_err(|e| format!("cannot create {}: {e}; choose another --out", out.display()))?;
+    let mut results = Vec::new();
+    for sc in &scenarios {
+        eprintln!(
+            "running {} ({} s simulated): {}",
+            sc.name, sc.duration_s, sc.description
+        );
+        let trace_path = out.join(format!("{}.csv", sc.name));
+        let file = std::fs::File::create(&trace_path)
+            .map_err(|e| format!("cannot write {}: {e}", trace_path.display()))?;
+        let mut w = std::io::BufWriter::new(file);
+        let mut host = SimHost::new();
+        let opts = sim::RunOptions {
+            progress: true,
+            keep_series: plots,
+        };
+        let r = sim::run(sc, &mut host, opts, Some(&mut w))
+            .map_err(|e| format!("writing {}: {e}", trace_path.display()))?;
+        if plots {
+            let svg = out.join(format!("{}.svg", sc.name));
+            report::plot(
+                &svg,
+                &format!("{}: {}", sc.name, short(&sc.description)),
+                &r,
+            )
+            .map_err(|e| format!("plot {}: {e}", svg.display()))?;
+        }
+        let failures = r.summary.check(sc);
+        results.push((r.summary, failures));
+    }
+    let table = report::table(&results);
+    print!("{table}");
+    let write = |name: &str, text: &str| {
+        let p = out.join(name);
+        std::fs::write(&p, text).map_err(|e| format!("cannot write {}: {e}", p.display()))
+    };
+    write("summary.txt", &table)?;
+    write("summary.csv", &report::csv(&results))?;
+    println!(
+        "\ntraces, plots and summary in {}/ (summary.txt, summary.csv, <scenario>.csv, <scenario>.svg)",
+        out.display()
+    );
+    Ok(results.iter().all(|(_, f)| f.is_empty()))
+}
+
+fn short(s: &str) -> String {
+    let first = s.split(". ").next().unwrap_or(s);
+    first.chars().take(90).collect()
+}
+
+fn open(kind: Kind, device: &str, speed: u32) -> Result<Box<dyn Transport>, String> {
+    Ok(match kind {
+        Kind::Spi => Box::new(SpiTransport::open(device, speed).map_err(|e| e.to_string())?),
+        Kind::Serial => Box::new(
+            SerialTransport::open(device, speed, Duration::from_millis(20))
+                .map_err(|e| e.to_string())?,
+        ),
+    })
+}
+
+struct Boxed(Box<dyn Transport>);
+impl Transport for Boxed {
+    fn exchange(&mut self, tx: &[u8], rx: &mut [u8]) -> Result<(), motorlink::LinkError> {
+        self.0.exchange(tx, rx)
+    }
+    fn name(&self) -> &str {
+        self.0.name()
+    }
+}
+
+fn monitor(device: &str, kind: Kind, speed: u32, seconds: f64) -> Result<(), String> {
+    let t = open(kind, device, speed)?;
+    let mut link = Link::new(Boxed(t), Bridge::new(BridgeConfig::DEFAULT));
+    let mut last_print = 0u64;
+    let end = std::time::Instant::now()
+        .checked_add(secs(seconds))
+        .unwrap_or_else(std::time::Instant::now);
+    while std::time::Instant::now() < end {
+        let diags = link.cycle().map_err(|e| e.to_string())?;
+        for (t, d) in diags {
+            println!("{}", serde_json::json!({"t_us": t, "diagnostic": d}));
+        }
+        let now = link.now_us();
+        if now.saturating_sub(last_print) >= 100_000 {
+            last_print = now;
+            if let Some(fb) = link.bridge.last_feedback {
+                println!(
+                    "{}",
+                    serde_json::json!({"t_us": now, "feedback": feedback_json(&fb)})
+                );
+            }
+        }
+    }
+    eprintln!("loop: {}", link.pacer.stats.summary());
+    Ok(())
+}
+
+fn ping(device: &str, kind: Kind, speed: u32, count: u32) -> Result<(), String> {
+    let t = open(kind, device, speed)?;
+    let mut link = Link::new(Boxed(t), Bridge::new(BridgeConfig::DEFAULT));
+    let mut ok = 0u32;
+    for i in 0..count {
+        let t0 = link.now_us();
+        let r = link.cycle();
+        let t1 = link.now_us();
+        match r {
+            Ok(_) => match link.bridge.last_feedback {
+                Some(fb) => {
+                    ok = ok.saturating_add(1);
+                    println!(
+                        "{i}: {} us, MCU time {} us, mode {}, faults {:#06x}, offset estimate {:?} us",
+                        t1.saturating_sub(t0),
+                        fb.timestamp_us,
+                        fb.mode,
+                        fb.fault_flags,
+                        link.bridge.clock.offset_at(t1 as f64).map(|o| o.round())
+                    );
+                }
+                None => println!("{i}: reply did not decode (see diagnostics)"),
+            },
+            Err(e) => println!("{i}: {e}"),
+        }
+    }
+    if ok == 0 {
+        return Err(format!(
+            "no valid reply from {device} in {count} exchanges: check wiring, SPI mode 0, and that the firmware runs"
+        ));
+    }
+    Ok(())
+}
+
+fn loop_bench(seconds: f64) -> Result<(), String> {
+    // The same work as on the robot (IK, encode, decode, checks), against a device that answers
+    // a valid feedback frame instantly.
+    let mut reply = [0u8; FRAME_LEN];
+    amr::encode_feedback(&MotorFeedback::default(), &mut reply);
+    let mut link = Link::new(
+        NullTransport {
+            reply: reply.to_vec(),
+        },
+        Bridge::new(BridgeConfig::DEFAULT),
+    );
+    link.pacer = Pacer::contract();
+    link.run_for(secs(seconds), |_| {})
+        .map_err(|e| e.to_string())?;
+    let s = &link.pacer.stats;
+    println!("{}", s.summary());
+    println!(
+        "{}",
+        serde_json::json!({"impl": "rust-absolute-deadline", "seconds": seconds, "periods": s.count,
+            "misses": s.misses, "miss_rate": s.miss_rate(), "mean_us": s.mean_us(), "std_us": s.std_us(),
+            "min_us": s.min_us, "max_us": s.max_us, "skipped": s.skipped})
+    );
+    Ok(())
+}
+
+fn main() -> ExitCode {
+    let cli = Cli::parse();
+    let r = match cli.cmd {
+        Cmd::Sim {
+            scenarios,
+            out,
+            duration,
+            no_plots,
+            list,
+        } => {
+            if list {
+                for (n, text) in scenario::BUILTIN {
+                    let d = Scenario::from_toml(text, n)
+                        .map(|s| s.description)
+                        .unwrap_or_default();
+                    println!("{n:20} {d}");
+                }
+                Ok(true)
+            } else {
+                run_sim(&scenarios, &out, duration, !no_plots)
+            }
+        }
+        Cmd::Decode { frame, hex } => decode(frame, &hex).map(|()| true),
+        Cmd::Encode { frame, json } => encode(frame, &json).map(|()| true),
+        Cmd::Monitor {
+            device,
+            kind,
+            speed,
+            seconds,
+        } => monitor(&device, kind, speed, seconds).map(|()| true),
+        Cmd::Ping {
+            device,
+            kind,
+            speed,
+            count,
+        } => ping(&device, kind, speed, count).map(|()| true),
+        Cmd::LoopBench { seconds } => loop_bench(seconds).map(|()| true),
+    };
+    match r {
+        Ok(true) => ExitCode::SUCCESS,
+        Ok(false) => {
+            eprintln!("some scenario expectations failed (see FAIL lines above)");
+            ExitCode::FAILURE
+        }
+        Err(e) => {
+            eprintln!("error: {e}");
+            ExitCode::from(2)
+        }
+    }
+}

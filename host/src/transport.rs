@@ -1,0 +1,147 @@
+//! Byte transports to the MCU: Linux spidev (seed 000/004) and serial / USB CDC (seed 001/003).
+
+use std::io::{Read, Write};
+use std::time::Duration;
+
+/// Why a transfer failed. Each message says what to check.
+#[derive(Debug)]
+pub enum LinkError {
+    /// The device could not be opened.
+    Open(String, String),
+    /// The device could not be configured.
+    Configure(String, String),
+    /// A transfer failed.
+    Io(String, std::io::Error),
+    /// Nothing (or not enough) came back in time.
+    Timeout(String, usize),
+}
+
+impl core::fmt::Display for LinkError {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        match self {
+            Self::Open(dev, e) => write!(
+                f,
+                "cannot open {dev}: {e}. Check that the device exists (ls /dev/spidev* /dev/ttyACM*), that SPI is enabled in the device tree, and that you are in the group owning it (spi or dialout)"
+            ),
+            Self::Configure(dev, e) => write!(f, "cannot configure {dev}: {e}. Check that the driver supports mode 0, 8 bits, 2 MHz"),
+            Self::Io(dev, e) => write!(f, "transfer on {dev} failed: {e}. Check the cable and that the MCU is powered"),
+            Self::Timeout(dev, n) => write!(f, "{dev}: only {n} bytes came back before the timeout. Check that the MCU firmware is running and the baud rate / wiring"),
+        }
+    }
+}
+
+impl std::error::Error for LinkError {}
+
+/// A full-duplex or request/response byte link.
+pub trait Transport {
+    /// Sends `tx` and fills `rx` with what comes back (SPI: simultaneously; serial: the reply).
+    fn exchange(&mut self, tx: &[u8], rx: &mut [u8]) -> Result<(), LinkError>;
+    /// The device name, for messages.
+    fn name(&self) -> &str;
+}
+
+/// Linux spidev master (`/dev/spidevB.C`), mode 0, 8-bit, MSB first.
+pub struct SpiTransport {
+    dev: spidev::Spidev,
+    path: String,
+}
+
+impl SpiTransport {
+    /// Opens `path` at `hz`.
+    pub fn open(path: &str, hz: u32) -> Result<Self, LinkError> {
+        let mut dev =
+            spidev::Spidev::open(path).map_err(|e| LinkError::Open(path.into(), e.to_string()))?;
+        let opts = spidev::SpidevOptions::new()
+            .bits_per_word(8)
+            .max_speed_hz(hz)
+            .mode(spidev::SpiModeFlags::SPI_MODE_0)
+            .build();
+        dev.configure(&opts)
+            .map_err(|e| LinkError::Configure(path.into(), e.to_string()))?;
+        Ok(Self {
+            dev,
+            path: path.into(),
+        })
+    }
+}
+
+impl Transport for SpiTransport {
+    fn exchange(&mut self, tx: &[u8], rx: &mut [u8]) -> Result<(), LinkError> {
+        let mut t = spidev::SpidevTransfer::read_write(tx, rx);
+        self.dev
+            .transfer(&mut t)
+            .map_err(|e| LinkError::Io(self.path.clone(), e))
+    }
+
+    fn name(&self) -> &str {
+        &self.path
+    }
+}
+
+/// A serial port or USB CDC ACM device (`/dev/ttyACM0`), raw 8N1.
+pub struct SerialTransport {
+    port: Box<dyn serialport::SerialPort>,
+    path: String,
+}
+
+impl SerialTransport {
+    /// Opens `path` at `baud` with a read timeout.
+    pub fn open(path: &str, baud: u32, timeout: Duration) -> Result<Self, LinkError> {
+        let port = serialport::new(path, baud)
+            .timeout(timeout)
+            .open()
+            .map_err(|e| LinkError::Open(path.into(), e.to_string()))?;
+        Ok(Self {
+            port,
+            path: path.into(),
+        })
+    }
+}
+
+impl Transport for SerialTransport {
+    fn exchange(&mut self, tx: &[u8], rx: &mut [u8]) -> Result<(), LinkError> {
+        self.port
+            .write_all(tx)
+            .map_err(|e| LinkError::Io(self.path.clone(), e))?;
+        let mut got = 0usize;
+        while got < rx.len() {
+            let Some(buf) = rx.get_mut(got..) else { break };
+            match self.port.read(buf) {
+                Ok(0) => break,
+                Ok(n) => got = got.saturating_add(n),
+                Err(e) if e.kind() == std::io::ErrorKind::TimedOut => break,
+                Err(e) => return Err(LinkError::Io(self.path.clone(), e)),
+            }
+        }
+        if got < rx.len() {
+            return Err(LinkError::Timeout(self.path.clone(), got));
+        }
+        Ok(())
+    }
+
+    fn name(&self) -> &str {
+        &self.path
+    }
+}
+
+/// A transport that answers with a fixed frame (tests and the loop benchmark).
+pub struct NullTransport {
+    /// What every exchange returns.
+    pub reply: Vec<u8>,
+}
+
+impl Transport for NullTransport {
+    fn exchange(&mut self, _tx: &[u8], rx: &mut [u8]) -> Result<(), LinkError> {
+        for (d, s) in rx
+            .iter_mut()
+            .zip(self.reply.iter().chain(std::iter::repeat(&0)))
+        {
+            *d = *s;
+        }
+        Ok(())
+    }
+
+    fn name(&self) -> &str {
+        "null"
+    }
+}

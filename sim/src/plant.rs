@@ -1,0 +1,270 @@
+//! The plant: two brushed DC gearmotors with their H-bridges, wheels, and a differential-drive robot.
+//!
+//! Per motor (motor side, ω_m = N · ω_wheel):
+//! ```text
+//!   L di/dt = u − R i − Ke ω_m          u = duty · V_bus while driving, 0 while braking (shorted)
+//!   τ_wheel = N · Kt · i
+//! ```
+//! Robot (no wheel slip), generalised speeds v (m/s) and ω (rad/s):
+//! ```text
+//!   M_eff dv/dt = (F_L + F_R) − c_v v − F_roll sign(v)     F = τ_wheel / r
+//!   J_eff dω/dt = (F_R − F_L) b/2 − c_ω ω
+//! ```
+//! with the rotor inertia reflected into M_eff and J_eff. The electrical equation is integrated
+//! exactly over one step for constant u and ω (zero-order hold), so the 0.5 ms electrical time
+//! constant is resolved at any step; the mechanics use semi-implicit Euler (τ_mech ≫ step).
+
+use serde::{Deserialize, Serialize};
+
+/// Physical parameters. Defaults: a 24 V, 40 kg base with 20:1 gearmotors.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(default)]
+pub struct PlantParams {
+    /// Bus voltage, V.
+    pub v_bus: f64,
+    /// Winding resistance, Ω.
+    pub r_ohm: f64,
+    /// Winding inductance, H (L/R = 0.5 ms, seed 000's electrical time constant).
+    pub l_h: f64,
+    /// Torque constant = back-EMF constant, N·m/A = V·s/rad (motor side).
+    pub kt: f64,
+    /// Gear ratio (motor turns per wheel turn).
+    pub gear: f64,
+    /// Rotor inertia, kg·m² (motor side).
+    pub j_rotor: f64,
+    /// Robot mass, kg.
+    pub mass_kg: f64,
+    /// Robot yaw inertia, kg·m².
+    pub yaw_inertia: f64,
+    /// Wheel radius, m.
+    pub wheel_radius_m: f64,
+    /// Distance between the wheels, m.
+    pub wheelbase_m: f64,
+    /// Viscous drag on v, N·s/m.
+    pub drag_v: f64,
+    /// Viscous drag on ω, N·m·s.
+    pub drag_w: f64,
+    /// Rolling resistance force, N (acts against v).
+    pub rolling_n: f64,
+    /// Encoder counts per wheel revolution.
+    pub counts_per_rev: u32,
+}
+
+impl Default for PlantParams {
+    fn default() -> Self {
+        Self {
+            v_bus: 24.0,
+            r_ohm: 1.0,
+            l_h: 0.5e-3,
+            kt: 0.04,
+            gear: 20.0,
+            j_rotor: 2.0e-5,
+            mass_kg: 40.0,
+            yaw_inertia: 1.5,
+            wheel_radius_m: 0.08,
+            wheelbase_m: 0.40,
+            drag_v: 2.0,
+            drag_w: 0.2,
+            rolling_n: 4.0,
+            counts_per_rev: 4096,
+        }
+    }
+}
+
+impl PlantParams {
+    /// Electrical time constant L/R, s.
+    pub fn tau_e(&self) -> f64 {
+        self.l_h / self.r_ohm
+    }
+
+    /// Effective translational mass including both rotors, kg.
+    pub fn m_eff(&self) -> f64 {
+        let r = self.wheel_radius_m;
+        self.mass_kg + 2.0 * self.j_rotor * self.gear * self.gear / (r * r)
+    }
+
+    /// Effective yaw inertia including both rotors, kg·m².
+    pub fn j_eff(&self) -> f64 {
+        let r = self.wheel_radius_m;
+        let h = self.wheelbase_m / 2.0;
+        self.yaw_inertia + 2.0 * self.j_rotor * self.gear * self.gear * h * h / (r * r)
+    }
+
+    /// Braking force per m/s of both shorted motors in steady state (L neglected), N·s/m:
+    /// each wheel gives N² Kt Ke / (R r²).
+    pub fn short_brake_damping(&self) -> f64 {
+        let r = self.wheel_radius_m;
+        2.0 * self.gear * self.gear * self.kt * self.kt / (self.r_ohm * r * r)
+    }
+}
+
+/// How the H-bridge of one motor is switched.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum BridgeDrive {
+    /// PWM with this average duty in [-1, 1].
+    Pwm(f64),
+    /// Low sides on: motor shorted (dynamic brake).
+    Short,
+}
+
+/// The state of the plant.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct Plant {
+    /// Parameters.
+    pub p: PlantParams,
+    /// Motor currents (left, right), A.
+    pub current: [f64; 2],
+    /// Robot forward speed, m/s.
+    pub v: f64,
+    /// Robot yaw rate, rad/s.
+    pub w: f64,
+    /// Pose x, m.
+    pub x: f64,
+    /// Pose y, m.
+    pub y: f64,
+    /// Heading, rad.
+    pub theta: f64,
+    /// Distance travelled (path length), m.
+    pub odometer: f64,
+    /// Wheel angles (left, right), rad.
+    pub wheel_angle: [f64; 2],
+}
+
+impl Plant {
+    /// A plant at rest.
+    pub fn new(p: PlantParams) -> Self {
+        Self {
+            p,
+            ..Self::default()
+        }
+    }
+
+    /// Wheel speeds (left, right), rad/s, from the body velocity.
+    pub fn wheel_speeds(&self) -> [f64; 2] {
+        let r = self.p.wheel_radius_m;
+        let h = self.p.wheelbase_m / 2.0;
+        [(self.v - self.w * h) / r, (self.v + self.w * h) / r]
+    }
+
+    /// Sets the body velocity from wheel speeds (used to start a scenario in motion).
+    pub fn set_wheel_speeds(&mut self, wl: f64, wr: f64) {
+        let r = self.p.wheel_radius_m;
+        self.v = (wl + wr) * r / 2.0;
+        self.w = (wr - wl) * r / self.p.wheelbase_m;
+    }
+
+    /// Advances by `dt` seconds with the bridges switched as given and `extra_v` volts of fault
+    /// voltage across each motor (zero in normal operation).
+    pub fn step(&mut self, dt: f64, drive: [BridgeDrive; 2], extra_v: [f64; 2]) {
+        let p = self.p;
+        let ws = self.wheel_speeds();
+        let a = (-dt * p.r_ohm / p.l_h).exp();
+        let mut force = [0.0; 2];
+        for k in 0..2 {
+            let (wk, ek, dk) = (ws[k], extra_v[k], drive[k]);
+            let u = match dk {
+                BridgeDrive::Pwm(d) => d.clamp(-1.0, 1.0) * p.v_bus,
+                BridgeDrive::Short => 0.0,
+            } + ek;
+            let emf = p.kt * p.gear * wk;
+            let i_inf = (u - emf) / p.r_ohm;
+            let i = i_inf + (self.current[k] - i_inf) * a;
+            self.current[k] = i;
+            force[k] = p.gear * p.kt * i / p.wheel_radius_m;
+        }
+        let h = p.wheelbase_m / 2.0;
+        let roll = if self.v.abs() < 1e-4 {
+            // Static: rolling resistance only opposes what would move the robot.
+            let drive_f = force[0] + force[1];
+            -drive_f.clamp(-p.rolling_n, p.rolling_n)
+        } else {
+            -p.rolling_n * self.v.signum()
+        };
+        let dv = (force[0] + force[1] - p.drag_v * self.v + roll) / p.m_eff();
+        let dw = ((force[1] - force[0]) * h - p.drag_w * self.w) / p.j_eff();
+        let v_new = self.v + dv * dt;
+        // Rolling resistance cannot reverse the motion within a step.
+        self.v = if self.v != 0.0
+            && v_new.signum() != self.v.signum()
+            && (force[0] + force[1]).abs() < p.rolling_n
+        {
+            0.0
+        } else {
+            v_new
+        };
+        self.w += dw * dt;
+        self.theta += self.w * dt;
+        self.x += self.v * self.theta.cos() * dt;
+        self.y += self.v * self.theta.sin() * dt;
+        self.odometer += self.v.abs() * dt;
+        let ws2 = self.wheel_speeds();
+        for k in 0..2 {
+            self.wheel_angle[k] += ws2[k] * dt;
+        }
+    }
+
+    /// The 16-bit encoder counter reading of wheel `k`.
+    pub fn encoder_counter(&self, k: usize) -> u16 {
+        let a = self.wheel_angle.get(k).copied().unwrap_or(0.0);
+        let counts = (a * f64::from(self.p.counts_per_rev) / core::f64::consts::TAU).floor();
+        (counts as i64) as u16
+    }
+}
+
+#[cfg(test)]
+#[allow(clippy::indexing_slicing, clippy::arithmetic_side_effects)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn electrical_time_constant_is_half_a_millisecond() {
+        // Locked robot (huge mass): a 24 V step gives i(t) = 24 (1 − e^{−t/τ}) with τ = 0.5 ms.
+        let p = PlantParams {
+            mass_kg: 1e9,
+            yaw_inertia: 1e9,
+            ..PlantParams::default()
+        };
+        let mut pl = Plant::new(p);
+        for _ in 0..10 {
+            pl.step(50e-6, [BridgeDrive::Pwm(1.0); 2], [0.0; 2]);
+        }
+        // After 0.5 ms: 24 × (1 − 1/e) = 15.171 A.
+        assert!((pl.current[0] - 15.171).abs() < 0.01, "{}", pl.current[0]);
+    }
+
+    #[test]
+    fn steady_speed_matches_back_emf() {
+        // Full duty, no load besides drag and rolling resistance: the motor settles a bit below
+        // u / (Kt·N) = 24 / 0.8 = 30 rad/s at the wheel.
+        let mut pl = Plant::new(PlantParams::default());
+        for _ in 0..200_000 {
+            pl.step(50e-6, [BridgeDrive::Pwm(1.0); 2], [0.0; 2]);
+        }
+        let w = pl.wheel_speeds()[0];
+        assert!(w > 28.0 && w < 30.0, "{w}");
+        assert!(pl.w.abs() < 1e-9);
+    }
+
+    #[test]
+    fn shorted_motors_brake_with_the_predicted_time_constant() {
+        let mut pl = Plant::new(PlantParams {
+            rolling_n: 0.0,
+            drag_v: 0.0,
+            ..PlantParams::default()
+        });
+        pl.set_wheel_speeds(20.0, 20.0);
+        let v0 = pl.v;
+        let tau = pl.p.m_eff() / pl.p.short_brake_damping();
+        let mut t = 0.0;
+        while t < tau {
+            pl.step(50e-6, [BridgeDrive::Short; 2], [0.0; 2]);
+            t += 50e-6;
+        }
+        // Exponential decay: v(τ) = v0/e (the inductance delays the current by ~0.5 ms ≪ τ).
+        let ratio = pl.v / v0;
+        assert!((ratio - (-1.0f64).exp()).abs() < 0.01, "{ratio} tau {tau}");
+        // Distance so far: v0 τ (1 − 1/e).
+        let d = v0 * tau * (1.0 - (-1.0f64).exp());
+        assert!((pl.odometer - d).abs() / d < 0.02, "{} vs {d}", pl.odometer);
+    }
+}

@@ -1,0 +1,631 @@
+//! The simulation loop: true time advances in steps of the MCU's 20 kHz current loop; the host's
+//! link cycles, Nav2's messages, SPI transfers and faults happen at their own (continuous) times
+//! and are applied at the first step at or after them.
+//!
+//! ```text
+//!  host clock  ─ cycle k ─┬─ t_send ────────────────── t_recv ─┬─ cycle k+1 ─     (1 ms ± jitter, drift)
+//!  SPI                    └ CS↓ ─ 64 B @ 2 MHz (256 µs) ─ CS↑ ┘
+//!  MCU clock   ── step (50 µs) ── … ── spi_dma_done at CS↑: decode → ladder → feedback stamped ──
+//! ```
+
+use std::io::Write;
+use std::time::Instant;
+
+use protocol::amr::FRAME_LEN;
+use statemachine::{FaultFlags, Mode};
+
+use crate::host::HostModel;
+use crate::mcu::{Mcu, McuParams};
+use crate::plant::{BridgeDrive, Plant};
+use crate::rng::Rng;
+use crate::scenario::{Fault, Request, Scenario};
+
+/// MCU step: the 20 kHz current loop.
+pub const STEP_S: f64 = 50e-6;
+/// SPI transfer time of one frame: 64 bytes at 2 MHz.
+pub const TRANSFER_S: f64 = FRAME_LEN as f64 * 8.0 / 2.0e6;
+/// MCU clock at the start of a run (it booted before the scenario), µs.
+pub const MCU_EPOCH_US: f64 = 1_000_000.0;
+/// Host clock at the start of a run, µs.
+pub const HOST_EPOCH_US: f64 = 50_000_000.0;
+
+/// How to run.
+#[derive(Clone, Copy, Debug, Default)]
+pub struct RunOptions {
+    /// Print progress to stderr for long runs.
+    pub progress: bool,
+    /// Keep per-tick series for plots.
+    pub keep_series: bool,
+}
+
+/// Mode as a short name.
+pub fn mode_name(m: Mode) -> &'static str {
+    match m {
+        Mode::Normal => "NORMAL",
+        Mode::Reduced => "REDUCED",
+        Mode::Hold => "HOLD",
+        Mode::Stop => "STOP",
+        Mode::Brake => "BRAKE",
+    }
+}
+
+/// Per-tick series for plots.
+#[derive(Clone, Debug, Default)]
+pub struct Series {
+    /// Time, s.
+    pub t: Vec<f64>,
+    /// True wheel speeds, rad/s.
+    pub wheel: [Vec<f64>; 2],
+    /// Host command, rad/s.
+    pub host_cmd: [Vec<f64>; 2],
+    /// Ladder-applied setpoint, rad/s.
+    pub applied: [Vec<f64>; 2],
+    /// Mode as 0..=4.
+    pub mode: Vec<u8>,
+    /// Watchdog age: ticks since the last valid frame.
+    pub age: Vec<u16>,
+    /// Robot speed, m/s.
+    pub v: Vec<f64>,
+}
+
+/// What a run measured.
+#[derive(Clone, Debug, Default)]
+pub struct Summary {
+    /// Scenario name.
+    pub name: String,
+    /// Simulated time, s.
+    pub sim_s: f64,
+    /// Wall-clock time, s.
+    pub wall_s: f64,
+    /// Fault onset, s.
+    pub onset_s: Option<f64>,
+    /// First HOLD after the onset, ms after it.
+    pub hold_ms: Option<f64>,
+    /// First STOP after the onset, ms after it.
+    pub stop_ms: Option<f64>,
+    /// First BRAKE after the onset, ms after it.
+    pub brake_ms: Option<f64>,
+    /// First comm-loss BRAKE: time since the last valid frame, ms.
+    pub brake_after_last_frame_ms: Option<f64>,
+    /// Distance from the onset until standstill, m.
+    pub stop_distance_m: Option<f64>,
+    /// Robot speed at the onset, m/s.
+    pub speed_at_onset: Option<f64>,
+    /// Highest robot speed, m/s.
+    pub peak_speed: f64,
+    /// Highest |motor current|, A.
+    pub peak_current: f64,
+    /// Command frames the host sent.
+    pub frames_sent: u64,
+    /// Command frames corrupted on the wire.
+    pub corrupted_sent: u64,
+    /// Corrupted frames refused by decoding or validation.
+    pub corrupted_rejected: u64,
+    /// Corrupted frames the ladder accepted as valid (applied).
+    pub corrupted_applied: u64,
+    /// Frames refused by the ladder (all reasons).
+    pub rejected_total: u64,
+    /// BRAKE latches.
+    pub brake_entries: u64,
+    /// Re-arms.
+    pub rearms: u64,
+    /// Mode at the end.
+    pub final_mode: String,
+    /// Robot speed at the end, m/s.
+    pub final_v: f64,
+    /// Host diagnostics: (first time s, name, count).
+    pub host_reports: Vec<(f64, String, u64)>,
+    /// Clock-sync error at the end (mean |error| over the last second), µs.
+    pub clock_err_final_us: Option<f64>,
+    /// Largest |clock error| after the first 10 s, µs.
+    pub clock_err_max_us: Option<f64>,
+    /// The seed estimator's error at the end, µs.
+    pub seed_clock_err_final_us: Option<f64>,
+}
+
+impl Summary {
+    /// Simulated seconds per wall-clock second.
+    pub fn speedup(&self) -> f64 {
+        if self.wall_s > 0.0 {
+            self.sim_s / self.wall_s
+        } else {
+            f64::INFINITY
+        }
+    }
+
+    /// Checks the scenario's expectations; returns one line per violation.
+    pub fn check(&self, sc: &Scenario) -> Vec<String> {
+        let e = &sc.expect;
+        let mut bad = Vec::new();
+        if let Some([lo, hi]) = e.brake_after_last_frame_ms {
+            match self.brake_after_last_frame_ms {
+                Some(x) if x >= lo && x <= hi => {}
+                other => bad.push(format!(
+                    "BRAKE after last frame: expected {lo}..{hi} ms, got {other:?}"
+                )),
+            }
+        }
+        if e.never_brake && self.brake_entries > 0 {
+            bad.push(format!("expected no BRAKE, got {}", self.brake_entries));
+        }
+        if let Some(max) = e.max_stop_distance_m {
+            match self.stop_distance_m {
+                Some(d) if d <= max => {}
+                other => bad.push(format!("stop distance: expected ≤ {max} m, got {other:?}")),
+            }
+        }
+        if let Some(max) = e.max_corrupted_applied {
+            if self.corrupted_applied > max {
+                bad.push(format!(
+                    "corrupted frames applied: expected ≤ {max}, got {}",
+                    self.corrupted_applied
+                ));
+            }
+        }
+        if let Some(m) = e.moving_at_end {
+            if (self.final_v.abs() > 0.1) != m {
+                bad.push(format!(
+                    "moving at end: expected {m}, v = {:.3}",
+                    self.final_v
+                ));
+            }
+        }
+        for r in &e.host_reports {
+            if !self.host_reports.iter().any(|(_, n, _)| n == r) {
+                bad.push(format!("host did not report {r}"));
+            }
+        }
+        if let Some(max) = e.max_clock_error_us {
+            match self.clock_err_final_us {
+                Some(x) if x <= max => {}
+                other => bad.push(format!("clock error: expected ≤ {max} us, got {other:?}")),
+            }
+        }
+        if let Some(m) = &e.final_mode {
+            if &self.final_mode != m {
+                bad.push(format!("final mode: expected {m}, got {}", self.final_mode));
+            }
+        }
+        bad
+    }
+}
+
+/// Result of one run.
+#[derive(Clone, Debug, Default)]
+pub struct RunResult {
+    /// Figures.
+    pub summary: Summary,
+    /// Series for plots (empty unless asked for).
+    pub series: Series,
+}
+
+struct Transfer {
+    t_send_host: u64,
+    cs_rise: f64,
+    recv: f64,
+    tx: [u8; FRAME_LEN],
+    rx: [u8; FRAME_LEN],
+    rx_stamp: Option<(u64, f64)>,
+    corrupted: bool,
+    mcu_done: bool,
+}
+
+/// Flips bits or overwrites a burst of bytes, as EMI does. Returns true if the frame changed.
+pub fn corrupt(frame: &mut [u8; FRAME_LEN], rng: &mut Rng) -> bool {
+    let before = *frame;
+    if rng.chance(0.5) {
+        let n = 1 + rng.below(4);
+        for _ in 0..n {
+            let bit = rng.below(FRAME_LEN as u64 * 8) as usize;
+            frame[bit / 8] ^= 1 << (bit % 8);
+        }
+    } else {
+        let len = 1 + rng.below(8) as usize;
+        let start = rng.below((FRAME_LEN - len + 1) as u64) as usize;
+        for b in &mut frame[start..start + len] {
+            *b = rng.next_u64() as u8;
+        }
+    }
+    *frame != before
+}
+
+fn in_window(t: f64, at: f64, dur: f64) -> bool {
+    t >= at && t < at + dur
+}
+
+/// Runs `sc` against `host`; writes the CSV trace to `trace` if given.
+pub fn run<H: HostModel>(
+    sc: &Scenario,
+    host: &mut H,
+    opts: RunOptions,
+    mut trace: Option<&mut dyn Write>,
+) -> std::io::Result<RunResult> {
+    let wall = Instant::now();
+    let (mcu_ppm, host_ppm) = sc.drift_ppm();
+    let mcu_rate = 1.0 + mcu_ppm * 1e-6;
+    let host_rate = 1.0 + host_ppm * 1e-6;
+    let dt = STEP_S / mcu_rate;
+    let host_clock = |t: f64| (HOST_EPOCH_US + t * 1e6 * host_rate).max(0.0) as u64;
+    let mut rng = Rng::new(sc.seed);
+    let mut plant = Plant::new(sc.plant);
+    let params = McuParams::default_for(sc.plant.counts_per_rev);
+    let counters = |pl: &Plant| [pl.encoder_counter(0), pl.encoder_counter(1)];
+    let mut mcu = Mcu::new(params, counters(&plant));
+    let mut mcu_boot = 0.0f64;
+    let mut mcu_epoch = MCU_EPOCH_US;
+    let mcu_clock =
+        |t: f64, boot: f64, epoch: f64| (epoch + (t - boot) * 1e6 * mcu_rate).max(0.0) as u64;
+    // The stamp of the feedback in the MCU's tx buffer: (MCU µs, true time).
+    let mut stamp: Option<(u64, f64)> = None;
+    let mut frozen_since: Option<f64> = None;
+
+    let mut requests: Vec<Request> = sc.requests.clone();
+    requests.sort_by(|a, b| a.at().total_cmp(&b.at()));
+    let mut next_request = 0usize;
+    let period = sc.host.link_period_ms * 1e-3 / host_rate;
+    let mut next_cycle = period;
+    let nav2_period = 1.0 / sc.host.nav2_rate_hz;
+    let mut next_nav2 = 0.0;
+    let mut inflight: Option<Transfer> = None;
+
+    let onset = sc.fault_onset();
+    let mut s = Summary {
+        name: sc.name.clone(),
+        onset_s: onset,
+        ..Summary::default()
+    };
+    let mut series = Series::default();
+    let mut last_valid_t: Option<f64> = None;
+    let mut prev_mode = mcu.out.mode;
+    let mut odo_at_onset: Option<f64> = None;
+    let mut clock_err_sum = 0.0;
+    let mut clock_err_n = 0u64;
+    let mut seed_err_sum = 0.0;
+    let mut seed_err_n = 0u64;
+    let mut estop_state = false;
+    let mut last_progress = 0.0;
+
+    if let Some(w) = trace.as_deref_mut() {
+        writeln!(w, "t_s,mode,age,faults,host_cmd_l,host_cmd_r,applied_l,applied_r,wheel_l,wheel_r,est_l,est_r,current_l,current_r,duty_l,duty_r,brake,v_mps,w_radps,x_m,y_m,odometer_m,frames_sent,corrupted_sent,corrupted_applied,rejected,clock_err_us")?;
+    }
+
+    let steps = (sc.duration_s / dt).ceil() as u64;
+    let mut tick_index = 0u64;
+    for n in 0..steps {
+        let t = n as f64 * dt;
+        let paused = sc.faults.iter().any(|f| match *f {
+            Fault::GcPause { at_s, duration_s } => in_window(t, at_s, duration_s),
+            _ => false,
+        });
+        let link_cut = sc.faults.iter().any(|f| match *f {
+            Fault::LinkCut { at_s, duration_s } => in_window(t, at_s, duration_s),
+            _ => false,
+        });
+
+        // Nav2 publishes at its rate (nothing while the host process is paused or Nav2 stalls).
+        while next_nav2 <= t {
+            let gap = sc.faults.iter().any(|f| match *f {
+                Fault::Nav2Gap { at_s, duration_s } => in_window(next_nav2, at_s, duration_s),
+                _ => false,
+            });
+            if !paused && !gap {
+                if let Some((v, w)) = sc.cmd_vel_at(next_nav2) {
+                    host.cmd_vel(host_clock(t), v, w);
+                }
+            }
+            next_nav2 += nav2_period;
+        }
+        while !paused && next_request < requests.len() && requests[next_request].at() <= t {
+            host.request(host_clock(t), requests[next_request]);
+            next_request += 1;
+        }
+
+        // Faults that act on the MCU side.
+        let mut overcurrent = [0.0f64; 2];
+        let mut estop = false;
+        for f in &sc.faults {
+            match *f {
+                Fault::McuFreeze { at_s, iwdg_ms }
+                    if frozen_since.is_none() && t >= at_s && t < at_s + iwdg_ms * 1e-3 =>
+                {
+                    frozen_since = Some(t);
+                }
+                Fault::EncoderGlitch {
+                    at_s,
+                    wheel,
+                    counts,
+                } if t >= at_s && t < at_s + dt => {
+                    let k = wheel.index();
+                    mcu.glitch[k] = mcu.glitch[k].wrapping_add(counts);
+                }
+                Fault::Overcurrent {
+                    at_s,
+                    duration_s,
+                    wheel,
+                    amps,
+                } if in_window(t, at_s, duration_s) => {
+                    overcurrent[wheel.index()] += amps;
+                }
+                Fault::Estop { at_s, release_s } => {
+                    estop |= t >= at_s && t < release_s;
+                }
+                _ => {}
+            }
+        }
+        if let Some(since) = frozen_since {
+            let iwdg = sc
+                .faults
+                .iter()
+                .find_map(|f| match *f {
+                    Fault::McuFreeze { iwdg_ms, .. } => Some(iwdg_ms * 1e-3),
+                    _ => None,
+                })
+                .unwrap_or(0.02);
+            if t >= since + iwdg {
+                // Independent watchdog reset: the firmware restarts, ladder latched in POWER_ON.
+                frozen_since = None;
+                mcu = Mcu::new(params, counters(&plant));
+                mcu_boot = t;
+                mcu_epoch = 0.0;
+                stamp = None;
+                // Frozen forever after this scenario's single freeze: mark it consumed.
+            }
+        }
+        let frozen = frozen_since.is_some();
+
+        // SPI: the MCU sees the end of the transfer at CS rise.
+        if let Some(tr) = inflight.as_mut() {
+            if !tr.mcu_done && tr.cs_rise <= t {
+                tr.mcu_done = true;
+                if !frozen && !link_cut {
+                    let stamp_us = mcu_clock(tr.cs_rise, mcu_boot, mcu_epoch) + 10;
+                    let accepted = mcu.on_frame(&tr.tx, stamp_us);
+                    stamp = Some((stamp_us, tr.cs_rise + 10e-6 / mcu_rate));
+                    if accepted {
+                        last_valid_t = Some(tr.cs_rise);
+                        if tr.corrupted {
+                            s.corrupted_applied += 1;
+                        }
+                    } else if tr.corrupted {
+                        s.corrupted_rejected += 1;
+                    }
+                }
+            }
+        }
+        if inflight.as_ref().is_some_and(|tr| tr.recv <= t) {
+            if let Some(tr) = inflight.take() {
+                let t_recv = host_clock(tr.recv);
+                host.end_cycle(tr.t_send_host, t_recv, &tr.rx);
+                if let Some((mcu_us, true_t)) = tr.rx_stamp {
+                    let truth = HOST_EPOCH_US + true_t * 1e6 * host_rate;
+                    let (ours, seed) = host.mcu_to_host_us(mcu_us);
+                    if let Some(est) = ours {
+                        let err = (est - truth).abs();
+                        if t > 10.0 {
+                            s.clock_err_max_us = Some(s.clock_err_max_us.unwrap_or(0.0).max(err));
+                        }
+                        if t > sc.duration_s - 1.0 {
+                            clock_err_sum += err;
+                            clock_err_n += 1;
+                        }
+                    }
+                    if let Some(est) = seed {
+                        if t > sc.duration_s - 1.0 {
+                            seed_err_sum += (est - truth).abs();
+                            seed_err_n += 1;
+                        }
+                    }
+                }
+                for d in host.drain_diagnostics() {
+                    match s.host_reports.iter_mut().find(|(_, n, _)| *n == d) {
+                        Some(e) => e.2 += 1,
+                        None => s.host_reports.push((t, d, 1)),
+                    }
+                }
+            }
+        }
+        // The host starts a cycle when its deadline passed (a paused host starts none).
+        if inflight.is_none() && next_cycle <= t {
+            let due = next_cycle;
+            while next_cycle <= t {
+                next_cycle += period;
+            }
+            if !paused {
+                let mut start = due + rng.uniform() * sc.host.send_jitter_us * 1e-6;
+                if rng.chance(sc.host.preempt_rate) {
+                    start += 0.3e-3 + rng.uniform() * 2.7e-3;
+                }
+                let start = start.max(t);
+                let mut tx = [0u8; FRAME_LEN];
+                host.begin_cycle(host_clock(start), &mut tx);
+                s.frames_sent += 1;
+                let mut corrupted = false;
+                let mut corrupt_feedback = false;
+                for f in &sc.faults {
+                    if let Fault::Corruption {
+                        rate,
+                        from_s,
+                        to_s,
+                        feedback,
+                    } = *f
+                    {
+                        if t >= from_s && t < to_s && rng.chance(rate) {
+                            corrupted |= corrupt(&mut tx, &mut rng);
+                        }
+                        if feedback && t >= from_s && t < to_s && rng.chance(rate) {
+                            corrupt_feedback = true;
+                        }
+                    }
+                }
+                if corrupted {
+                    s.corrupted_sent += 1;
+                }
+                let cs_fall = start + 5e-6;
+                let cs_rise = cs_fall + TRANSFER_S;
+                let mut recv = cs_rise + 5e-6 + rng.uniform() * sc.host.recv_jitter_us * 1e-6;
+                if rng.chance(sc.host.preempt_rate) {
+                    recv += 0.3e-3 + rng.uniform() * 2.7e-3;
+                }
+                let mut rx = if link_cut {
+                    [0u8; FRAME_LEN]
+                } else {
+                    mcu.tx_buffer
+                };
+                if corrupt_feedback {
+                    corrupt(&mut rx, &mut rng);
+                }
+                inflight = Some(Transfer {
+                    t_send_host: host_clock(start),
+                    cs_rise,
+                    recv,
+                    tx,
+                    rx,
+                    rx_stamp: if link_cut { None } else { stamp },
+                    corrupted,
+                    mcu_done: false,
+                });
+            }
+        }
+
+        // MCU tasks.
+        let counts = counters(&plant);
+        let shunt = [
+            plant.current[0] + overcurrent[0],
+            plant.current[1] + overcurrent[1],
+        ];
+        let mut ticked = false;
+        if !frozen {
+            if estop != estop_state {
+                estop_state = estop;
+                mcu.on_estop(estop);
+            }
+            ticked = mcu.step(counts, shunt).ticked;
+        }
+        plant.step(dt, mcu.bridge, [0.0; 2]);
+
+        // Measurements.
+        let out = mcu.out;
+        let since = |x: f64| onset.filter(|&o| x >= o).map(|o| (x - o) * 1e3);
+        if out.mode != prev_mode {
+            let after = since(t);
+            match out.mode {
+                Mode::Hold if s.hold_ms.is_none() => s.hold_ms = after,
+                Mode::Stop if s.stop_ms.is_none() => s.stop_ms = after,
+                Mode::Brake => {
+                    if s.brake_ms.is_none() {
+                        s.brake_ms = after;
+                    }
+                    if s.brake_after_last_frame_ms.is_none()
+                        && out.faults.contains(FaultFlags::COMM_LOST)
+                        && (onset.is_none() || after.is_some())
+                    {
+                        s.brake_after_last_frame_ms = last_valid_t.map(|lv| (t - lv) * 1e3);
+                    }
+                }
+                _ => {}
+            }
+            prev_mode = out.mode;
+        }
+        if let Some(o) = onset {
+            if t >= o && odo_at_onset.is_none() {
+                odo_at_onset = Some(plant.odometer);
+                s.speed_at_onset = Some(plant.v);
+            }
+        }
+        if let Some(o0) = odo_at_onset {
+            if s.stop_distance_m.is_none() && plant.v.abs() < 0.002 && plant.w.abs() < 0.01 {
+                s.stop_distance_m = Some(plant.odometer - o0);
+            }
+        }
+        s.peak_speed = s.peak_speed.max(plant.v.abs());
+        s.peak_current = s
+            .peak_current
+            .max(plant.current[0].abs())
+            .max(plant.current[1].abs());
+
+        if ticked || (frozen && n % 20 == 0) {
+            tick_index += 1;
+            let ws = plant.wheel_speeds();
+            let hc = host.last_command();
+            let ap = match out.drive {
+                statemachine::Drive::Run { left, right } => [left.to_num::<f64>(), right.to_num()],
+                statemachine::Drive::Brake => [0.0; 2],
+            };
+            if opts.keep_series && tick_index % u64::from(sc.trace_every_ms) == 0 {
+                series.t.push(t);
+                for k in 0..2 {
+                    series.wheel[k].push(ws[k]);
+                    series.host_cmd[k].push(f64::from(hc[k]));
+                    series.applied[k].push(ap[k]);
+                }
+                series.mode.push(out.mode as u8);
+                series.age.push(out.age);
+                series.v.push(plant.v);
+            }
+            if let Some(w) = trace.as_deref_mut() {
+                if tick_index % u64::from(sc.trace_every_ms) == 0 {
+                    let est = mcu.speed_estimate();
+                    let brake = matches!(mcu.bridge[0], BridgeDrive::Short);
+                    writeln!(
+                        w,
+                        "{:.4},{},{},{:#06x},{:.4},{:.4},{:.4},{:.4},{:.4},{:.4},{:.3},{:.3},{:.3},{:.3},{:.4},{:.4},{},{:.4},{:.4},{:.4},{:.4},{:.4},{},{},{},{},{}",
+                        t,
+                        mode_name(out.mode),
+                        out.age,
+                        out.faults.0,
+                        hc[0],
+                        hc[1],
+                        ap[0],
+                        ap[1],
+                        ws[0],
+                        ws[1],
+                        est[0],
+                        est[1],
+                        mcu.measured[0],
+                        mcu.measured[1],
+                        mcu.duty[0],
+                        mcu.duty[1],
+                        u8::from(brake),
+                        plant.v,
+                        plant.w,
+                        plant.x,
+                        plant.y,
+                        plant.odometer,
+                        s.frames_sent,
+                        s.corrupted_sent,
+                        s.corrupted_applied,
+                        mcu.ladder.counters().rejected_total(),
+                        if clock_err_n > 0 { format!("{:.2}", clock_err_sum / clock_err_n as f64) } else { String::new() },
+                    )?;
+                }
+            }
+        }
+        if opts.progress && sc.duration_s >= 20.0 && t - last_progress >= sc.duration_s / 20.0 {
+            last_progress = t;
+            let el = wall.elapsed().as_secs_f64();
+            eprintln!(
+                "  {}: {:>3.0} % ({:.0} of {:.0} s simulated, {:.0}x real time)",
+                sc.name,
+                100.0 * t / sc.duration_s,
+                t,
+                sc.duration_s,
+                t / el.max(1e-9)
+            );
+        }
+    }
+
+    s.sim_s = sc.duration_s;
+    s.wall_s = wall.elapsed().as_secs_f64();
+    s.final_mode = mode_name(mcu.out.mode).to_string();
+    s.final_v = plant.v;
+    s.rejected_total = u64::from(mcu.ladder.counters().rejected_total());
+    s.brake_entries = u64::from(mcu.ladder.counters().brake_entries);
+    s.rearms = u64::from(mcu.ladder.counters().rearms);
+    if clock_err_n > 0 {
+        s.clock_err_final_us = Some(clock_err_sum / clock_err_n as f64);
+    }
+    if seed_err_n > 0 {
+        s.seed_clock_err_final_us = Some(seed_err_sum / seed_err_n as f64);
+    }
+    Ok(RunResult { summary: s, series })
+}

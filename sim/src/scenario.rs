@@ -1,0 +1,433 @@
+//! Scenario files: what the host is asked to do when, which faults happen when, and what must hold.
+//!
+//! A scenario is TOML (see `sim/scenarios/*.toml`); every time is in seconds of true time.
+//!
+//! ```toml
+//! name = "gc-pause-50ms"
+//! duration_s = 2.0
+//! [[cmd_vel]]            # what Nav2 publishes (piecewise constant), at nav2_rate_hz
+//! from_s = 0.2
+//! to_s = 2.0
+//! v = 1.0
+//! w = 0.0
+//! [[faults]]
+//! kind = "gc_pause"      # the host process stops: no frames, no cmd_vel handling
+//! at_s = 1.0
+//! duration_s = 0.05
+//! [expect]
+//! brake_after_last_frame_ms = [9.0, 10.0]
+//! ```
+
+use crate::plant::PlantParams;
+use serde::{Deserialize, Serialize};
+
+/// One piece of Nav2's velocity command profile.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+pub struct CmdVelSegment {
+    /// Start, s.
+    pub from_s: f64,
+    /// End (exclusive), s.
+    pub to_s: f64,
+    /// Forward speed, m/s.
+    pub v: f64,
+    /// Yaw rate, rad/s.
+    pub w: f64,
+}
+
+/// Something the operator or the host software asks for at a given time.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(tag = "kind", rename_all = "snake_case")]
+pub enum Request {
+    /// Arm the drive (sends enable 0 then 1).
+    Arm {
+        /// When, s.
+        at_s: f64,
+    },
+    /// Explicit re-arm after BRAKE (operator action).
+    Rearm {
+        /// When, s.
+        at_s: f64,
+    },
+    /// Disable the drive.
+    Disarm {
+        /// When, s.
+        at_s: f64,
+    },
+}
+
+impl Request {
+    /// When the request is made, s.
+    pub fn at(&self) -> f64 {
+        match *self {
+            Self::Arm { at_s } | Self::Rearm { at_s } | Self::Disarm { at_s } => at_s,
+        }
+    }
+}
+
+/// Which wheel.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Wheel {
+    /// Left wheel (index 0).
+    Left,
+    /// Right wheel (index 1).
+    Right,
+}
+
+impl Wheel {
+    /// Index into (left, right) arrays.
+    pub fn index(self) -> usize {
+        match self {
+            Self::Left => 0,
+            Self::Right => 1,
+        }
+    }
+}
+
+/// An injected fault.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(tag = "kind", rename_all = "snake_case")]
+pub enum Fault {
+    /// Incident-A: each command frame in the window is corrupted with probability `rate`
+    /// (random bit flips or a burst of random bytes, as EMI would).
+    Corruption {
+        /// Probability per frame.
+        rate: f64,
+        /// Window start, s (default 0).
+        #[serde(default)]
+        from_s: f64,
+        /// Window end, s (default: the whole run).
+        #[serde(default = "forever")]
+        to_s: f64,
+        /// Also corrupt feedback frames at the same rate.
+        #[serde(default)]
+        feedback: bool,
+    },
+    /// Incident-C: the host process pauses (garbage collection): no SPI transfers, no cmd_vel.
+    GcPause {
+        /// Start, s.
+        at_s: f64,
+        /// Length, s.
+        duration_s: f64,
+    },
+    /// Nav2 misses cycles: no cmd_vel published for the duration (the bridge keeps sending).
+    Nav2Gap {
+        /// Start, s.
+        at_s: f64,
+        /// Length, s.
+        duration_s: f64,
+    },
+    /// The SPI link is cut (cable, connector): transfers return garbage-free silence.
+    LinkCut {
+        /// Start, s.
+        at_s: f64,
+        /// Length, s.
+        duration_s: f64,
+    },
+    /// Clock rates: the MCU crystal and the host clock deviate from true time.
+    ClockDrift {
+        /// MCU clock error, ppm (positive: fast).
+        mcu_ppm: f64,
+        /// Host clock error, ppm.
+        #[serde(default)]
+        host_ppm: f64,
+    },
+    /// The MCU firmware hangs: no interrupt runs, the bridge keeps its last PWM, the SPI DMA keeps
+    /// replaying the last feedback; the hardware watchdog resets the MCU after `iwdg_ms`.
+    McuFreeze {
+        /// Start, s.
+        at_s: f64,
+        /// Independent watchdog timeout, ms.
+        #[serde(default = "default_iwdg_ms")]
+        iwdg_ms: f64,
+    },
+    /// A wheel encoder glitches: its counter jumps by `counts` (EMI on the A/B lines).
+    EncoderGlitch {
+        /// When, s.
+        at_s: f64,
+        /// Which wheel.
+        wheel: Wheel,
+        /// Counter jump.
+        #[serde(default = "default_glitch")]
+        counts: i32,
+    },
+    /// A motor lead shorts to ground through the shunt: `amps` of extra current that the bridge
+    /// cannot control, seen by the current sensor.
+    Overcurrent {
+        /// Start, s.
+        at_s: f64,
+        /// Length, s.
+        duration_s: f64,
+        /// Which wheel.
+        wheel: Wheel,
+        /// Fault current, A.
+        amps: f64,
+    },
+    /// The emergency-stop button is pressed at `at_s` and released at `release_s`.
+    Estop {
+        /// Press, s.
+        at_s: f64,
+        /// Release, s.
+        release_s: f64,
+    },
+}
+
+fn forever() -> f64 {
+    f64::INFINITY
+}
+fn default_iwdg_ms() -> f64 {
+    20.0
+}
+fn default_glitch() -> i32 {
+    3000
+}
+
+/// Limits the run must respect; checked by [`crate::runner::Summary::check`].
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+#[serde(default)]
+pub struct Expect {
+    /// BRAKE must latch between these times after the last valid frame before it, ms.
+    pub brake_after_last_frame_ms: Option<[f64; 2]>,
+    /// BRAKE must never latch.
+    pub never_brake: bool,
+    /// Distance travelled from the fault onset until standstill, at most, m.
+    pub max_stop_distance_m: Option<f64>,
+    /// Corrupted frames that changed the applied command: at most.
+    pub max_corrupted_applied: Option<u64>,
+    /// The robot must be moving (|v| > 0.1 m/s) at the end.
+    pub moving_at_end: Option<bool>,
+    /// The host must have reported these diagnostics (names as in the trace).
+    pub host_reports: Vec<String>,
+    /// Clock-sync error at the end, at most, µs.
+    pub max_clock_error_us: Option<f64>,
+    /// Mode at the end (NORMAL, REDUCED, HOLD, STOP, BRAKE).
+    pub final_mode: Option<String>,
+}
+
+/// Host-side settings of a scenario.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(default)]
+pub struct HostSettings {
+    /// Nav2 cmd_vel rate, Hz.
+    pub nav2_rate_hz: f64,
+    /// Link period, ms.
+    pub link_period_ms: f64,
+    /// Send-side scheduling latency, uniform 0..this, µs.
+    pub send_jitter_us: f64,
+    /// Receive-side latency, 5 µs + uniform 0..this, µs.
+    pub recv_jitter_us: f64,
+    /// Probability that a cycle is preempted (late by 0.3–3 ms).
+    pub preempt_rate: f64,
+}
+
+impl Default for HostSettings {
+    fn default() -> Self {
+        Self {
+            nav2_rate_hz: 20.0,
+            link_period_ms: 1.0,
+            send_jitter_us: 30.0,
+            recv_jitter_us: 40.0,
+            preempt_rate: 0.0,
+        }
+    }
+}
+
+/// A whole scenario.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct Scenario {
+    /// Short name (file stem), used for output files.
+    pub name: String,
+    /// What it shows.
+    #[serde(default)]
+    pub description: String,
+    /// Simulated time, s.
+    pub duration_s: f64,
+    /// Random seed.
+    #[serde(default = "default_seed")]
+    pub seed: u64,
+    /// Write one trace row every this many ms (1 = every watchdog tick).
+    #[serde(default = "default_trace_every")]
+    pub trace_every_ms: u32,
+    /// Host settings.
+    #[serde(default)]
+    pub host: HostSettings,
+    /// Plant parameters.
+    #[serde(default)]
+    pub plant: PlantParams,
+    /// Operator / host requests. Default: arm at 10 ms.
+    #[serde(default = "default_requests")]
+    pub requests: Vec<Request>,
+    /// Nav2's velocity profile.
+    #[serde(default)]
+    pub cmd_vel: Vec<CmdVelSegment>,
+    /// Injected faults.
+    #[serde(default)]
+    pub faults: Vec<Fault>,
+    /// What must hold.
+    #[serde(default)]
+    pub expect: Expect,
+}
+
+fn default_seed() -> u64 {
+    1
+}
+fn default_trace_every() -> u32 {
+    1
+}
+fn default_requests() -> Vec<Request> {
+    vec![Request::Arm { at_s: 0.01 }]
+}
+
+/// Why a scenario could not be loaded.
+#[derive(Debug)]
+pub enum ScenarioError {
+    /// The file could not be read.
+    Io(String, std::io::Error),
+    /// The TOML did not parse or did not match the format.
+    Parse(String, String),
+    /// The values are inconsistent.
+    Invalid(String, String),
+}
+
+impl core::fmt::Display for ScenarioError {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        match self {
+            Self::Io(p, e) => write!(f, "cannot read scenario {p}: {e}"),
+            Self::Parse(p, e) => write!(
+                f,
+                "scenario {p} is not valid TOML for this format: {e}(see sim/scenarios/*.toml for examples)"
+            ),
+            Self::Invalid(p, e) => write!(f, "scenario {p}: {e}"),
+        }
+    }
+}
+
+impl std::error::Error for ScenarioError {}
+
+impl Scenario {
+    /// Parses a scenario from TOML text; `origin` names it in errors.
+    pub fn from_toml(text: &str, origin: &str) -> Result<Self, ScenarioError> {
+        let s: Self =
+            toml::from_str(text).map_err(|e| ScenarioError::Parse(origin.into(), e.to_string()))?;
+        s.validate(origin)?;
+        Ok(s)
+    }
+
+    /// Reads and parses a scenario file.
+    pub fn load(path: &std::path::Path) -> Result<Self, ScenarioError> {
+        let origin = path.display().to_string();
+        let text =
+            std::fs::read_to_string(path).map_err(|e| ScenarioError::Io(origin.clone(), e))?;
+        Self::from_toml(&text, &origin)
+    }
+
+    fn validate(&self, origin: &str) -> Result<(), ScenarioError> {
+        let bad = |m: &str| Err(ScenarioError::Invalid(origin.into(), m.into()));
+        if !(self.duration_s.is_finite() && self.duration_s > 0.0 && self.duration_s <= 86_400.0) {
+            return bad("duration_s must be in (0, 86400]");
+        }
+        if self.trace_every_ms == 0 {
+            return bad("trace_every_ms must be at least 1");
+        }
+        if !(self.host.link_period_ms > 0.05 && self.host.link_period_ms < 1000.0) {
+            return bad("host.link_period_ms must be in (0.05, 1000)");
+        }
+        if !(self.host.nav2_rate_hz > 0.0 && self.host.nav2_rate_hz <= 1000.0) {
+            return bad("host.nav2_rate_hz must be in (0, 1000]");
+        }
+        for f in &self.faults {
+            if let Fault::Corruption { rate, .. } = f {
+                if !(0.0..=1.0).contains(rate) {
+                    return bad("corruption rate must be in [0, 1]");
+                }
+            }
+        }
+        Ok(())
+    }
+
+    /// Nav2's command at time `t`, if a segment covers it.
+    pub fn cmd_vel_at(&self, t: f64) -> Option<(f64, f64)> {
+        self.cmd_vel
+            .iter()
+            .find(|s| t >= s.from_s && t < s.to_s)
+            .map(|s| (s.v, s.w))
+    }
+
+    /// The MCU and host clock errors, ppm.
+    pub fn drift_ppm(&self) -> (f64, f64) {
+        self.faults
+            .iter()
+            .find_map(|f| match *f {
+                Fault::ClockDrift { mcu_ppm, host_ppm } => Some((mcu_ppm, host_ppm)),
+                _ => None,
+            })
+            .unwrap_or((0.0, 0.0))
+    }
+
+    /// Time of the first fault that disturbs the link or the drive (for stopping distances), s.
+    pub fn fault_onset(&self) -> Option<f64> {
+        self.faults
+            .iter()
+            .filter_map(|f| match *f {
+                Fault::GcPause { at_s, .. }
+                | Fault::LinkCut { at_s, .. }
+                | Fault::McuFreeze { at_s, .. }
+                | Fault::EncoderGlitch { at_s, .. }
+                | Fault::Overcurrent { at_s, .. }
+                | Fault::Estop { at_s, .. }
+                | Fault::Nav2Gap { at_s, .. } => Some(at_s),
+                Fault::Corruption { .. } | Fault::ClockDrift { .. } => None,
+            })
+            .fold(None, |acc: Option<f64>, t| {
+                Some(acc.map_or(t, |a| a.min(t)))
+            })
+    }
+}
+
+/// The built-in scenarios, embedded so `motorlink sim` works from any directory.
+pub const BUILTIN: [(&str, &str); 12] = [
+    ("nominal", include_str!("../scenarios/nominal.toml")),
+    (
+        "corruption-1e-4",
+        include_str!("../scenarios/corruption-1e-4.toml"),
+    ),
+    (
+        "corruption-1e-3",
+        include_str!("../scenarios/corruption-1e-3.toml"),
+    ),
+    (
+        "corruption-1e-2",
+        include_str!("../scenarios/corruption-1e-2.toml"),
+    ),
+    (
+        "gc-pause-50ms",
+        include_str!("../scenarios/gc-pause-50ms.toml"),
+    ),
+    (
+        "nav2-gap-100ms",
+        include_str!("../scenarios/nav2-gap-100ms.toml"),
+    ),
+    (
+        "nav2-stall-300ms",
+        include_str!("../scenarios/nav2-stall-300ms.toml"),
+    ),
+    (
+        "clock-drift-50ppm",
+        include_str!("../scenarios/clock-drift-50ppm.toml"),
+    ),
+    ("mcu-freeze", include_str!("../scenarios/mcu-freeze.toml")),
+    (
+        "encoder-failure",
+        include_str!("../scenarios/encoder-failure.toml"),
+    ),
+    ("overcurrent", include_str!("../scenarios/overcurrent.toml")),
+    ("estop-rearm", include_str!("../scenarios/estop-rearm.toml")),
+];
+
+/// Parses every built-in scenario.
+pub fn builtin() -> Result<Vec<Scenario>, ScenarioError> {
+    BUILTIN
+        .iter()
+        .map(|(name, text)| Scenario::from_toml(text, &format!("built-in {name}")))
+        .collect()
+}

@@ -1,0 +1,169 @@
+//! Every built-in scenario as a test: its own expectations plus physics and ladder checks whose
+//! bounds come from the plant parameters, not from the simulator's output.
+#![allow(
+    clippy::unwrap_used,
+    clippy::expect_used,
+    clippy::indexing_slicing,
+    clippy::arithmetic_side_effects,
+    clippy::panic
+)]
+
+use motorlink::SimHost;
+use sim::runner::STEP_S;
+use sim::scenario::{builtin, Scenario};
+use sim::Summary;
+
+fn run(name: &str) -> (Scenario, Summary, SimHost) {
+    let sc = builtin()
+        .unwrap()
+        .into_iter()
+        .find(|s| s.name == name)
+        .unwrap_or_else(|| panic!("no built-in {name}"));
+    let mut host = SimHost::new();
+    let r = sim::run(&sc, &mut host, sim::RunOptions::default(), None).unwrap();
+    let fails = r.summary.check(&sc);
+    assert!(fails.is_empty(), "{name}: {fails:#?}\n{:#?}", r.summary);
+    (sc, r.summary, host)
+}
+
+/// Upper bound of the distance after a comm-loss or fault BRAKE from speed v0: `lag` s at v0,
+/// then dynamic braking, whose exponential decay covers v0 · m_eff / k_short (rolling
+/// resistance and drag only shorten it).
+fn brake_bound(sc: &Scenario, v0: f64, lag: f64) -> f64 {
+    let p = sc.plant;
+    v0 * (lag + p.m_eff() / p.short_brake_damping())
+}
+
+fn first_report(s: &Summary, name: &str) -> f64 {
+    s.host_reports
+        .iter()
+        .find(|(_, n, _)| n == name)
+        .map(|(t, _, _)| *t)
+        .unwrap_or_else(|| panic!("{name} not reported: {:?}", s.host_reports))
+}
+
+#[test]
+fn every_scenario_file_parses() {
+    let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("scenarios");
+    let mut n = 0;
+    for e in std::fs::read_dir(dir).unwrap() {
+        let p = e.unwrap().path();
+        if p.extension().is_some_and(|x| x == "toml") {
+            Scenario::load(&p).unwrap();
+            n += 1;
+        }
+    }
+    assert!(n >= builtin().unwrap().len());
+}
+
+#[test]
+fn nominal_never_brakes_and_tracks() {
+    let (_, s, _) = run("nominal");
+    assert_eq!(s.brake_entries, 0);
+    // 1.0 m/s commanded; the REDUCED limit (10 rad/s · 0.08 m = 0.8 m/s) applies for the first
+    // second, then NORMAL: the peak is the commanded speed, not more.
+    assert!(
+        s.peak_speed > 0.95 && s.peak_speed < 1.05,
+        "{}",
+        s.peak_speed
+    );
+}
+
+#[test]
+fn gc_pause_brakes_ten_ticks_after_the_last_frame() {
+    let (sc, s, _) = run("gc-pause-50ms");
+    let b = s.brake_after_last_frame_ms.unwrap();
+    // BRAKE at the 10th tick after the last valid frame: the first tick comes within 1 ms of the
+    // frame (one 50 µs step of granularity), the 10th 9 ms after the first.
+    assert!(b >= 9.0 - STEP_S * 1e3 && b <= 10.0, "{b}");
+    // From the pause start, whose last frame came up to 1 ms before it: HOLD at the 3rd tick after that
+    // frame (age 3), STOP at the 5th, BRAKE at the 10th, each up to 1 ms earlier as seen from the pause.
+    let (h, st, br) = (s.hold_ms.unwrap(), s.stop_ms.unwrap(), s.brake_ms.unwrap());
+    assert!((1.0..=3.0).contains(&h), "{h}");
+    assert!((3.0..=5.0).contains(&st), "{st}");
+    assert!((8.0..=10.0).contains(&br), "{br}");
+    let v0 = s.speed_at_onset.unwrap();
+    assert!((v0 - 1.0).abs() < 0.05, "{v0}");
+    let d = s.stop_distance_m.unwrap();
+    let bound = brake_bound(&sc, v0, 0.010);
+    assert!(d <= bound, "{d} > {bound}");
+    // And not absurdly short: the 9 ms at speed before BRAKE alone cover 9 mm.
+    assert!(d > 0.009 * v0 * 0.9, "{d}");
+    assert_eq!(s.final_mode, "BRAKE");
+}
+
+#[test]
+fn corruption_is_never_applied() {
+    for name in ["corruption-1e-4", "corruption-1e-3", "corruption-1e-2"] {
+        let (_, s, _) = run(name);
+        assert!(s.corrupted_sent > 0, "{name}: nothing corrupted");
+        assert_eq!(s.corrupted_applied, 0, "{name}");
+        assert_eq!(s.corrupted_rejected, s.corrupted_sent, "{name}");
+        assert_eq!(s.brake_entries, 0, "{name}");
+    }
+}
+
+#[test]
+fn nav2_gap_is_bridged_and_a_stall_stops_softly() {
+    let (_, s, _) = run("nav2-gap-100ms");
+    assert_eq!(s.brake_entries, 0);
+    assert!(s.final_v > 0.9);
+    let (_, s, _) = run("nav2-stall-300ms");
+    assert_eq!(s.brake_entries, 0);
+    // Last cmd_vel before the stall at 1.95 s (20 Hz); stale 200 ms later.
+    let t = first_report(&s, "cmd_vel_stale");
+    assert!((2.149..=2.153).contains(&t), "{t}");
+}
+
+#[test]
+fn clock_sync_beats_the_seed_under_drift() {
+    let (_, s, _) = run("clock-drift-50ppm");
+    let ours = s.clock_err_final_us.unwrap();
+    let seed = s.seed_clock_err_final_us.unwrap();
+    assert!(ours < 50.0, "{ours}");
+    // The seed's EMA lags a 50 ppm ramp and its int() stalls it: at least several µs.
+    assert!(seed > 2.0 * ours, "seed {seed} ours {ours}");
+}
+
+#[test]
+fn mcu_freeze_is_detected_by_the_host_and_ends_in_brake() {
+    let (sc, s, _) = run("mcu-freeze");
+    let t = first_report(&s, "mcu_frozen");
+    // 5 ms stale limit after the last advancing feedback, within a couple of cycles.
+    assert!((2.004..=2.008).contains(&t), "{t}");
+    // The independent watchdog resets the MCU 20 ms after the freeze: BRAKE from POWER_ON.
+    let b = s.brake_ms.unwrap();
+    assert!((19.9..=20.1).contains(&b), "{b}");
+    let d = s.stop_distance_m.unwrap();
+    assert!(
+        d <= brake_bound(&sc, s.speed_at_onset.unwrap(), 0.021),
+        "{d}"
+    );
+}
+
+#[test]
+fn encoder_failure_and_overcurrent_brake_at_once() {
+    for (name, within_ms) in [("encoder-failure", 0.1), ("overcurrent", 0.05)] {
+        let (sc, s, _) = run(name);
+        let b = s.brake_ms.unwrap();
+        assert!(b <= within_ms + 1e-9, "{name}: {b}");
+        let d = s.stop_distance_m.unwrap();
+        assert!(
+            d <= brake_bound(&sc, s.speed_at_onset.unwrap(), 0.001),
+            "{name}: {d}"
+        );
+        assert!(s.host_reports.iter().any(|(_, n, _)| n == "brake_latched"));
+    }
+}
+
+#[test]
+fn estop_needs_the_rearm() {
+    let (_, s, host) = run("estop-rearm");
+    assert!(s.brake_ms.unwrap() <= 0.05);
+    // The power-on arm and the operator's re-arm: nothing else released BRAKE.
+    assert_eq!(s.rearms, 2);
+    // Re-armed only after the operator's request at 3.5 s, never at the release (3.0 s).
+    let t = first_report(&s, "rearmed");
+    assert!((3.5..3.52).contains(&t), "{t}");
+    assert!(host.log.iter().all(|(_, d)| d.name() != "arm_refused"));
+}
