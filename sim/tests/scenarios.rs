@@ -75,7 +75,7 @@ fn gc_pause_brakes_ten_ticks_after_the_last_frame() {
     let b = s.brake_after_last_frame_ms.unwrap();
     // BRAKE at the 10th tick after the last valid frame: the first tick comes within 1 ms of the
     // frame (one 50 µs step of granularity), the 10th 9 ms after the first.
-    assert!(b >= 9.0 - STEP_S * 1e3 && b <= 10.0, "{b}");
+    assert!((9.0 - STEP_S * 1e3..=10.0).contains(&b), "{b}");
     // From the pause start, whose last frame came up to 1 ms before it: HOLD at the 3rd tick after that
     // frame (age 3), STOP at the 5th, BRAKE at the 10th, each up to 1 ms earlier as seen from the pause.
     let (h, st, br) = (s.hold_ms.unwrap(), s.stop_ms.unwrap(), s.brake_ms.unwrap());
