@@ -1,3 +1,205 @@
-//! Cross-crate safety harnesses; see SAFETY.md for the invariants they prove.
+//! Cross-crate safety harnesses: bytes from the SPI link through `protocol` into the `statemachine`
+//! ladder, as the firmware's `spi_dma_done` task feeds them. The invariants are INV-10 to INV-12 of
+//! `SAFETY.md`; each body runs under Kani (`verify_<name>`) and as a `cargo test` twin (`<name>`).
 #![no_std]
 #![forbid(unsafe_code)]
+#![cfg_attr(
+    test,
+    allow(
+        clippy::unwrap_used,
+        clippy::indexing_slicing,
+        clippy::arithmetic_side_effects,
+        clippy::panic
+    )
+)]
+
+use protocol::amr::{command_event, encode_command, MotorCommand, FRAME_LEN};
+use statemachine::harness::{arbitrary, Source};
+use statemachine::{assume, cover, Event, Ladder, RejectReason, Speed};
+
+fn valid_ladder(src: &mut impl Source) -> Option<Ladder> {
+    let cfg = arbitrary::config(src)?;
+    let l = arbitrary::ladder(src, cfg);
+    l.is_valid().then_some(l)
+}
+
+/// A command whose speeds the default configuration accepts, in speed mode.
+fn plausible_command(src: &mut impl Source) -> MotorCommand {
+    let v = statemachine::Config::DEFAULT.params().v_max;
+    MotorCommand {
+        timestamp_us: src.u32(),
+        left_speed_cmd: src.speed_within(v).to_num(),
+        right_speed_cmd: src.speed_within(v).to_num(),
+        control_mode: 1,
+        enable: src.bool(),
+        seq: src.u32(),
+    }
+}
+
+fn unchanged(a: &Ladder, b: &Ladder) -> bool {
+    a.applied() == b.applied()
+        && a.last_valid() == b.last_valid()
+        && a.age() == b.age()
+        && a.mode() == b.mode()
+        && a.output().drive == b.output().drive
+}
+
+/// INV-10: whatever 64 bytes arrive, a frame that does not decode changes neither the command, nor the
+/// watchdog age, nor the rung, nor the setpoint: corrupted bytes only ever add to the counters.
+pub fn undecodable_bytes_never_move_the_drive(src: &mut impl Source) {
+    let l0 = valid_ladder(src);
+    assume!(src, l0.is_some());
+    let Some(l0) = l0 else { return };
+    let mut frame = [0u8; FRAME_LEN];
+    if src.bool() {
+        for b in frame.iter_mut() {
+            *b = src.u8();
+        }
+    } else {
+        // A real frame with up to three bytes overwritten: corruption that keeps the frame's shape
+        // (none overwritten: the frame as sent).
+        encode_command(&plausible_command(src), &mut frame);
+        let n = src.below(4);
+        for _ in 0..n {
+            let i = usize::from(src.below(FRAME_LEN as u8));
+            if let Some(b) = frame.get_mut(i) {
+                *b = src.u8();
+            }
+        }
+    }
+    let e = command_event(&frame);
+    let mut l = l0;
+    l.step(e);
+    if let Event::Rejected(_) = e {
+        assert!(unchanged(&l0, &l));
+        assert_eq!(
+            l.counters().rejected_total(),
+            l0.counters().rejected_total().saturating_add(1)
+        );
+    }
+    cover!(
+        src,
+        e == Event::Rejected(RejectReason::Crc),
+        "refused by the CRC"
+    );
+    cover!(src, matches!(e, Event::Frame(_)), "bytes that form a frame");
+}
+
+/// INV-11 (Incident-A): one flipped bit anywhere in a valid command frame never reaches the ladder as a
+/// command, from any state.
+pub fn single_bit_flip_never_reaches_the_ladder(src: &mut impl Source) {
+    let l0 = valid_ladder(src);
+    assume!(src, l0.is_some());
+    let Some(l0) = l0 else { return };
+    let cmd = plausible_command(src);
+    let mut frame = [0u8; FRAME_LEN];
+    encode_command(&cmd, &mut frame);
+    let clean_event = command_event(&frame);
+    let bit = src.u16();
+    assume!(src, usize::from(bit) < FRAME_LEN * 8);
+    if let Some(b) = frame.get_mut(usize::from(bit / 8)) {
+        *b ^= 1u8 << (bit % 8);
+    }
+    let e = command_event(&frame);
+    assert!(matches!(e, Event::Rejected(_)));
+    let mut l = l0;
+    l.step(e);
+    assert!(unchanged(&l0, &l));
+    let mut clean = l0;
+    clean.step(clean_event);
+    cover!(
+        src,
+        clean.last_valid() != l0.last_valid(),
+        "the unflipped frame would have been applied"
+    );
+    cover!(src, bit < 8 * 2, "flip in the length or first payload byte");
+    cover!(
+        src,
+        usize::from(bit) >= 8 * (FRAME_LEN - 2),
+        "flip in the CRC"
+    );
+}
+
+/// INV-12: a valid frame delivers exactly the command that was sent: the ladder's new command is the
+/// sent speeds to within half a Q16.16 step, with the sent enable and sequence number.
+pub fn valid_frame_delivers_the_sent_command(src: &mut impl Source) {
+    let l0 = valid_ladder(src);
+    assume!(src, l0.is_some());
+    let Some(l0) = l0 else { return };
+    let cmd = plausible_command(src);
+    let mut frame = [0u8; FRAME_LEN];
+    encode_command(&cmd, &mut frame);
+    let e = command_event(&frame);
+    let Event::Frame(c) = e else {
+        panic!("a freshly encoded frame must decode");
+    };
+    assert_eq!(c, cmd.to_command());
+    let mut l = l0;
+    l.step(e);
+    if l.counters().valid_frames != l0.counters().valid_frames {
+        let sp = l.last_valid();
+        assert!(sp.is_some());
+        if let Some(sp) = sp {
+            let half = Speed::from_bits(1);
+            let sent_l: Speed = Speed::from_num(cmd.left_speed_cmd);
+            assert!(sp.left.saturating_sub(sent_l).saturating_abs() <= half);
+            assert_eq!(sp.enable, cmd.enable);
+            assert_eq!(sp.seq, Some(cmd.seq));
+        }
+        assert_eq!(l.age(), 0);
+    }
+    cover!(
+        src,
+        l.counters().valid_frames != l0.counters().valid_frames,
+        "accepted"
+    );
+    cover!(
+        src,
+        l.counters().rejected(RejectReason::Stale) != l0.counters().rejected(RejectReason::Stale),
+        "refused as stale"
+    );
+}
+
+#[cfg(kani)]
+mod verification {
+    use super::*;
+    use statemachine::harness::KaniSource;
+
+    #[kani::proof]
+    #[kani::unwind(66)]
+    fn verify_undecodable_bytes_never_move_the_drive() {
+        undecodable_bytes_never_move_the_drive(&mut KaniSource);
+    }
+
+    #[kani::proof]
+    #[kani::unwind(66)]
+    fn verify_single_bit_flip_never_reaches_the_ladder() {
+        single_bit_flip_never_reaches_the_ladder(&mut KaniSource);
+    }
+
+    #[kani::proof]
+    #[kani::unwind(66)]
+    fn verify_valid_frame_delivers_the_sent_command() {
+        valid_frame_delivers_the_sent_command(&mut KaniSource);
+    }
+}
+
+#[cfg(test)]
+mod twins {
+    use statemachine::harness::Twin;
+
+    #[test]
+    fn undecodable_bytes_never_move_the_drive() {
+        Twin::run(21, 200_000, super::undecodable_bytes_never_move_the_drive).assert_covered(2);
+    }
+
+    #[test]
+    fn single_bit_flip_never_reaches_the_ladder() {
+        Twin::run(22, 200_000, super::single_bit_flip_never_reaches_the_ladder).assert_covered(3);
+    }
+
+    #[test]
+    fn valid_frame_delivers_the_sent_command() {
+        Twin::run(23, 200_000, super::valid_frame_delivers_the_sent_command).assert_covered(2);
+    }
+}
