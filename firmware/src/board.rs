@@ -423,7 +423,7 @@ impl Iwdg {
 ///
 /// A byte slip (a glitch on SCK) shifts every following frame; each then fails its CRC, the
 /// ladder brakes on comm loss after 10 ticks, and only a reset resynchronises (fail-safe, not
-/// fail-operational; see firmware/SAFETY-FIRMWARE.md).
+/// fail-operational; see proofs/SAFETY.md §7, F7).
 pub struct Link {
     dma: pac::DMA1,
     _spi: pac::SPI2,
