@@ -6,6 +6,7 @@
 //! explicit times, so the simulator (`sim`) runs exactly this code against the simulated MCU.
 
 pub mod bridge;
+pub mod cli;
 pub mod clocksync;
 pub mod feedback;
 pub mod kinematics;

@@ -6,11 +6,12 @@ use std::time::Duration;
 
 use clap::{Parser, Subcommand, ValueEnum};
 use motorlink::bridge::{Bridge, BridgeConfig};
+use motorlink::cli::{self, FrameKind};
 use motorlink::link::Link;
 use motorlink::pacing::Pacer;
 use motorlink::transport::{NullTransport, SerialTransport, SpiTransport, Transport};
 use motorlink::SimHost;
-use protocol::amr::{self, MotorCommand, MotorFeedback, FRAME_LEN};
+use protocol::amr::{self, MotorFeedback, FRAME_LEN};
 use sim::report;
 use sim::scenario::{self, Scenario};
 
@@ -23,14 +24,6 @@ use sim::scenario::{self, Scenario};
 struct Cli {
     #[command(subcommand)]
     cmd: Cmd,
-}
-
-#[derive(Clone, Copy, ValueEnum)]
-enum Frame {
-    /// Seed 000 SPI command frame (Jetson → MCU), 64 bytes.
-    AmrCommand,
-    /// Seed 000 SPI feedback frame (MCU → Jetson), 64 bytes.
-    AmrFeedback,
 }
 
 #[derive(Clone, Copy, ValueEnum)]
@@ -60,21 +53,29 @@ enum Cmd {
         #[arg(long)]
         list: bool,
     },
-    /// Decode one frame (hex, spaces allowed) to JSON.
+    /// Decode one frame (hex, spaces allowed) to JSON; cdc and teensy-robust also take a capture.
+    #[command(after_long_help = cli::SHAPES)]
     Decode {
         /// Frame type.
         #[arg(long, value_enum)]
-        frame: Frame,
+        frame: FrameKind,
         /// The bytes in hex (e.g. from a logic-analyser capture).
         hex: String,
+        /// Motors in a seed 003 CmdMsg (MAX_SUPPORTED_MTRS), 1 to 16.
+        #[arg(long, default_value_t = cli::DEFAULT_MOTORS)]
+        motors: usize,
     },
     /// Encode a JSON message to a frame in hex.
+    #[command(after_long_help = cli::SHAPES)]
     Encode {
         /// Frame type.
         #[arg(long, value_enum)]
-        frame: Frame,
-        /// The message as JSON (field names as `decode` prints them).
+        frame: FrameKind,
+        /// The message as JSON (field names as `decode` prints them; see --help).
         json: String,
+        /// Motors in a seed 003 CmdMsg (MAX_SUPPORTED_MTRS), 1 to 16.
+        #[arg(long, default_value_t = cli::DEFAULT_MOTORS)]
+        motors: usize,
     },
     /// Run the 1 kHz bridge disarmed against a device and print feedback and diagnostics.
     Monitor {
@@ -112,127 +113,9 @@ enum Cmd {
     },
 }
 
-fn parse_hex(s: &str) -> Result<Vec<u8>, String> {
-    let clean: String = s
-        .chars()
-        .filter(|c| !c.is_whitespace() && *c != ':' && *c != ',')
-        .collect();
-    let clean = clean.strip_prefix("0x").unwrap_or(&clean);
-    if clean.len() % 2 != 0 {
-        return Err(format!(
-            "hex input has an odd number of digits ({}); give two digits per byte",
-            clean.len()
-        ));
-    }
-    (0..clean.len())
-        .step_by(2)
-        .map(|i| {
-            let pair = clean.get(i..i.saturating_add(2)).unwrap_or("");
-            u8::from_str_radix(pair, 16)
-                .map_err(|_| format!("'{pair}' at position {i} is not a hex byte"))
-        })
-        .collect()
-}
-
 /// A duration from user input: negative or NaN is zero, too large is a year.
 fn secs(s: f64) -> Duration {
     Duration::try_from_secs_f64(s.max(0.0)).unwrap_or(Duration::from_secs(365 * 24 * 3600))
-}
-
-fn to_hex(b: &[u8]) -> String {
-    b.iter().map(|x| format!("{x:02x}")).collect()
-}
-
-fn frame_array(bytes: &[u8]) -> Result<[u8; FRAME_LEN], String> {
-    <[u8; FRAME_LEN]>::try_from(bytes).map_err(|_| {
-        format!(
-            "an AMR frame is exactly {FRAME_LEN} bytes, got {}; capture one whole CS-low period",
-            bytes.len()
-        )
-    })
-}
-
-fn command_json(c: &MotorCommand) -> serde_json::Value {
-    serde_json::json!({
-        "timestamp_us": c.timestamp_us, "left_speed_cmd": c.left_speed_cmd,
-        "right_speed_cmd": c.right_speed_cmd, "control_mode": c.control_mode,
-        "enable": c.enable, "seq": c.seq,
-    })
-}
-
-fn feedback_json(f: &MotorFeedback) -> serde_json::Value {
-    serde_json::json!({
-        "timestamp_us": f.timestamp_us, "left_speed": f.left_speed, "right_speed": f.right_speed,
-        "left_current": f.left_current, "right_current": f.right_current,
-        "left_encoder": f.left_encoder, "right_encoder": f.right_encoder,
-        "fault_flags": f.fault_flags, "seq": f.seq, "mode": f.mode, "cmd_seq": f.cmd_seq,
-    })
-}
-
-fn get<T: serde::de::DeserializeOwned + Default>(
-    v: &serde_json::Value,
-    key: &str,
-) -> Result<T, String> {
-    match v.get(key) {
-        None => Ok(T::default()),
-        Some(x) => serde_json::from_value(x.clone()).map_err(|e| format!("field '{key}': {e}")),
-    }
-}
-
-fn decode(frame: Frame, hex: &str) -> Result<(), String> {
-    let bytes = frame_array(&parse_hex(hex)?)?;
-    let json = match frame {
-        Frame::AmrCommand => amr::decode_command(&bytes).map(|c| command_json(&c)),
-        Frame::AmrFeedback => amr::decode_feedback(&bytes).map(|f| feedback_json(&f)),
-    }
-    .map_err(|r| format!("frame refused: {r:?} (code {}); a CRC error means the capture is misaligned or corrupted", r as u8))?;
-    println!(
-        "{}",
-        serde_json::to_string_pretty(&json).map_err(|e| e.to_string())?
-    );
-    Ok(())
-}
-
-fn encode(frame: Frame, json: &str) -> Result<(), String> {
-    let v: serde_json::Value =
-        serde_json::from_str(json).map_err(|e| format!("not valid JSON: {e}"))?;
-    if !v.is_object() {
-        return Err(
-            "give a JSON object, e.g. '{\"left_speed_cmd\": 1.0, \"enable\": true}'".into(),
-        );
-    }
-    let mut out = [0u8; FRAME_LEN];
-    match frame {
-        Frame::AmrCommand => {
-            let c = MotorCommand {
-                timestamp_us: get(&v, "timestamp_us")?,
-                left_speed_cmd: get(&v, "left_speed_cmd")?,
-                right_speed_cmd: get(&v, "right_speed_cmd")?,
-                control_mode: get(&v, "control_mode")?,
-                enable: get(&v, "enable")?,
-                seq: get(&v, "seq")?,
-            };
-            amr::encode_command(&c, &mut out);
-        }
-        Frame::AmrFeedback => {
-            let f = MotorFeedback {
-                timestamp_us: get(&v, "timestamp_us")?,
-                left_speed: get(&v, "left_speed")?,
-                right_speed: get(&v, "right_speed")?,
-                left_current: get(&v, "left_current")?,
-                right_current: get(&v, "right_current")?,
-                left_encoder: get(&v, "left_encoder")?,
-                right_encoder: get(&v, "right_encoder")?,
-                fault_flags: get(&v, "fault_flags")?,
-                seq: get(&v, "seq")?,
-                mode: get(&v, "mode")?,
-                cmd_seq: get(&v, "cmd_seq")?,
-            };
-            amr::encode_feedback(&f, &mut out);
-        }
-    }
-    println!("{}", to_hex(&out));
-    Ok(())
 }
 
 fn load_scenarios(args: &[String]) -> Result<Vec<Scenario>, String> {
@@ -358,10 +241,7 @@ fn monitor(device: &str, kind: Kind, speed: u32, seconds: f64) -> Result<(), Str
         if now.saturating_sub(last_print) >= 100_000 {
             last_print = now;
             if let Some(fb) = link.bridge.last_feedback {
-                println!(
-                    "{}",
-                    serde_json::json!({"t_us": now, "feedback": feedback_json(&fb)})
-                );
+                println!("{}", serde_json::json!({"t_us": now, "feedback": fb}));
             }
         }
     }
@@ -450,8 +330,18 @@ fn main() -> ExitCode {
                 run_sim(&scenarios, &out, duration, !no_plots)
             }
         }
-        Cmd::Decode { frame, hex } => decode(frame, &hex).map(|()| true),
-        Cmd::Encode { frame, json } => encode(frame, &json).map(|()| true),
+        Cmd::Decode { frame, hex, motors } => cli::decode(frame, &hex, motors).map(|s| {
+            println!("{s}");
+            true
+        }),
+        Cmd::Encode {
+            frame,
+            json,
+            motors,
+        } => cli::encode(frame, &json, motors).map(|s| {
+            println!("{s}");
+            true
+        }),
         Cmd::Monitor {
             device,
             kind,
