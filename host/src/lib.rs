@@ -12,6 +12,7 @@ pub mod feedback;
 pub mod kinematics;
 pub mod link;
 pub mod pacing;
+pub mod serial;
 pub mod simhost;
 pub mod transport;
 
@@ -19,4 +20,4 @@ pub use bridge::{ArmState, Bridge, BridgeConfig, Diagnostic};
 pub use clocksync::{ClockSync, ClockSyncConfig};
 pub use kinematics::DiffDrive;
 pub use simhost::SimHost;
-pub use transport::{LinkError, Transport};
+pub use transport::{ByteStream, LinkError, Transport};
