@@ -2,16 +2,18 @@
 
 use std::path::{Path, PathBuf};
 use std::process::ExitCode;
-use std::time::Duration;
+use std::time::{Duration, Instant};
 
 use clap::{Parser, Subcommand, ValueEnum};
 use motorlink::bridge::{Bridge, BridgeConfig};
 use motorlink::cli::{self, FrameKind};
 use motorlink::link::Link;
 use motorlink::pacing::Pacer;
+use motorlink::serial::{CdcLink, TeensyLink};
 use motorlink::transport::{NullTransport, SerialTransport, SpiTransport, Transport};
 use motorlink::SimHost;
 use protocol::amr::{self, MotorFeedback, FRAME_LEN};
+use protocol::cdc;
 use sim::report;
 use sim::scenario::{self, Scenario};
 
@@ -30,8 +32,10 @@ struct Cli {
 enum Kind {
     /// Linux spidev (seed 000), 2 MHz mode 0.
     Spi,
-    /// Serial / USB CDC.
+    /// Serial / USB CDC speaking seed 001 (`AA 55` frames): PING, IMU, STATUS, ACK.
     Serial,
+    /// Serial to a Teensy speaking seed 003 robust frames (COBS + CRC); monitor only listens.
+    Teensy,
 }
 
 #[derive(Subcommand)]
@@ -90,6 +94,9 @@ enum Cmd {
         /// How long, s.
         #[arg(long, default_value_t = 5.0)]
         seconds: f64,
+        /// Motors in a seed 003 CmdMsg (--kind teensy).
+        #[arg(long, default_value_t = cli::DEFAULT_MOTORS)]
+        motors: usize,
     },
     /// Exchange a few frames with a device and report round trip and clock offset.
     Ping {
@@ -205,14 +212,102 @@ fn short(s: &str) -> String {
     first.chars().take(90).collect()
 }
 
-fn open(kind: Kind, device: &str, speed: u32) -> Result<Box<dyn Transport>, String> {
-    Ok(match kind {
-        Kind::Spi => Box::new(SpiTransport::open(device, speed).map_err(|e| e.to_string())?),
-        Kind::Serial => Box::new(
-            SerialTransport::open(device, speed, Duration::from_millis(20))
-                .map_err(|e| e.to_string())?,
-        ),
-    })
+fn open_spi(device: &str, speed: u32) -> Result<Box<dyn Transport>, String> {
+    Ok(Box::new(
+        SpiTransport::open(device, speed).map_err(|e| e.to_string())?,
+    ))
+}
+
+fn open_serial(device: &str, baud: u32) -> Result<SerialTransport, String> {
+    SerialTransport::open(device, baud, Duration::from_millis(20)).map_err(|e| e.to_string())
+}
+
+fn elapsed_ms(t0: Instant) -> u64 {
+    u64::try_from(t0.elapsed().as_millis()).unwrap_or(u64::MAX)
+}
+
+/// Seed 001: PING every 100 ms, print every received message with the ladder event it maps to.
+fn monitor_cdc(device: &str, baud: u32, seconds: f64) -> Result<(), String> {
+    let mut link = CdcLink::new(open_serial(device, baud)?);
+    let t0 = Instant::now();
+    let end = t0.checked_add(secs(seconds)).unwrap_or(t0);
+    let mut last_ping: Option<Instant> = None;
+    while Instant::now() < end {
+        if last_ping.is_none_or(|t| t.elapsed() >= Duration::from_millis(100)) {
+            link.send(&cdc::Message::Ping).map_err(|e| e.to_string())?;
+            last_ping = Some(Instant::now());
+        }
+        for m in link.poll().map_err(|e| e.to_string())? {
+            let event = m.to_event().map(|e| format!("{e:?}"));
+            println!(
+                "{}",
+                serde_json::json!({"t_ms": elapsed_ms(t0), "message": cli::CdcJson::from(m), "event": event})
+            );
+        }
+        for e in link.errors.drain(..) {
+            println!(
+                "{}",
+                serde_json::json!({"t_ms": elapsed_ms(t0), "error": format!("{e:?}"), "code": e as u8,
+                    "reason": format!("{:?}", e.reason()), "reason_code": e.reason() as u8})
+            );
+        }
+    }
+    eprintln!(
+        "{}",
+        serde_json::json!({"device": device, "stats": link.stats()})
+    );
+    Ok(())
+}
+
+/// Seed 003: listen and print every robust frame received.
+fn monitor_teensy<const N: usize>(device: &str, baud: u32, seconds: f64) -> Result<(), String> {
+    let mut link = TeensyLink::<_, N>::new(open_serial(device, baud)?);
+    let t0 = Instant::now();
+    let end = t0.checked_add(secs(seconds)).unwrap_or(t0);
+    while Instant::now() < end {
+        for m in link.poll().map_err(|e| e.to_string())? {
+            println!(
+                "{}",
+                serde_json::json!({"t_ms": elapsed_ms(t0), "message": cli::CmdMsgJson::from(&m)})
+            );
+        }
+        for r in link.errors.drain(..) {
+            println!(
+                "{}",
+                serde_json::json!({"t_ms": elapsed_ms(t0), "reason": format!("{r:?}"), "reason_code": r as u8})
+            );
+        }
+    }
+    eprintln!(
+        "{}",
+        serde_json::json!({"device": device, "stats": link.stats()})
+    );
+    Ok(())
+}
+
+fn ping_cdc(device: &str, baud: u32, count: u32) -> Result<(), String> {
+    let mut link = CdcLink::new(open_serial(device, baud)?);
+    let mut ok = 0u32;
+    for i in 0..count {
+        match link.ping(Duration::from_millis(200)) {
+            Ok(r) => {
+                ok = ok.saturating_add(1);
+                println!(
+                    "{i}: {} us, reply {}",
+                    r.round_trip.as_micros(),
+                    serde_json::json!(cli::CdcJson::from(r.reply))
+                );
+            }
+            Err(e) => println!("{i}: {e}"),
+        }
+    }
+    eprintln!("{}", serde_json::json!({"stats": link.stats()}));
+    if ok == 0 {
+        return Err(format!(
+            "no ACK or STATUS from {device} in {count} PINGs: check the baud rate and that the firmware speaks seed 001"
+        ));
+    }
+    Ok(())
 }
 
 struct Boxed(Box<dyn Transport>);
@@ -225,8 +320,29 @@ impl Transport for Boxed {
     }
 }
 
-fn monitor(device: &str, kind: Kind, speed: u32, seconds: f64) -> Result<(), String> {
-    let t = open(kind, device, speed)?;
+fn monitor(
+    device: &str,
+    kind: Kind,
+    speed: u32,
+    seconds: f64,
+    motors: usize,
+) -> Result<(), String> {
+    match kind {
+        Kind::Spi => {}
+        Kind::Serial => return monitor_cdc(device, speed, seconds),
+        Kind::Teensy => {
+            return match motors {
+                1 => monitor_teensy::<1>(device, speed, seconds),
+                2 => monitor_teensy::<2>(device, speed, seconds),
+                3 => monitor_teensy::<3>(device, speed, seconds),
+                4 => monitor_teensy::<4>(device, speed, seconds),
+                6 => monitor_teensy::<6>(device, speed, seconds),
+                8 => monitor_teensy::<8>(device, speed, seconds),
+                n => Err(format!("--motors {n}: monitor supports 1, 2, 3, 4, 6, 8")),
+            }
+        }
+    }
+    let t = open_spi(device, speed)?;
     let mut link = Link::new(Boxed(t), Bridge::new(BridgeConfig::DEFAULT));
     let mut last_print = 0u64;
     let end = std::time::Instant::now()
@@ -250,7 +366,16 @@ fn monitor(device: &str, kind: Kind, speed: u32, seconds: f64) -> Result<(), Str
 }
 
 fn ping(device: &str, kind: Kind, speed: u32, count: u32) -> Result<(), String> {
-    let t = open(kind, device, speed)?;
+    match kind {
+        Kind::Spi => {}
+        Kind::Serial => return ping_cdc(device, speed, count),
+        Kind::Teensy => {
+            return Err(
+                "ping speaks seed 001 (--kind serial) or seed 000 (--kind spi); a Teensy has no probe message: use monitor --kind teensy".into(),
+            )
+        }
+    }
+    let t = open_spi(device, speed)?;
     let mut link = Link::new(Boxed(t), Bridge::new(BridgeConfig::DEFAULT));
     let mut ok = 0u32;
     for i in 0..count {
@@ -347,7 +472,8 @@ fn main() -> ExitCode {
             kind,
             speed,
             seconds,
-        } => monitor(&device, kind, speed, seconds).map(|()| true),
+            motors,
+        } => monitor(&device, kind, speed, seconds, motors).map(|()| true),
         Cmd::Ping {
             device,
             kind,
