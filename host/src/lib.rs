@@ -6,11 +6,13 @@
 //! explicit times, so the simulator (`sim`) runs exactly this code against the simulated MCU.
 
 pub mod bridge;
+pub mod cli;
 pub mod clocksync;
 pub mod feedback;
 pub mod kinematics;
 pub mod link;
 pub mod pacing;
+pub mod serial;
 pub mod simhost;
 pub mod transport;
 
@@ -18,4 +20,4 @@ pub use bridge::{ArmState, Bridge, BridgeConfig, Diagnostic};
 pub use clocksync::{ClockSync, ClockSyncConfig};
 pub use kinematics::DiffDrive;
 pub use simhost::SimHost;
-pub use transport::{LinkError, Transport};
+pub use transport::{ByteStream, LinkError, Transport};

@@ -2,15 +2,18 @@
 
 use std::path::{Path, PathBuf};
 use std::process::ExitCode;
-use std::time::Duration;
+use std::time::{Duration, Instant};
 
 use clap::{Parser, Subcommand, ValueEnum};
 use motorlink::bridge::{Bridge, BridgeConfig};
+use motorlink::cli::{self, FrameKind};
 use motorlink::link::Link;
 use motorlink::pacing::Pacer;
+use motorlink::serial::{CdcLink, TeensyLink};
 use motorlink::transport::{NullTransport, SerialTransport, SpiTransport, Transport};
 use motorlink::SimHost;
-use protocol::amr::{self, MotorCommand, MotorFeedback, FRAME_LEN};
+use protocol::amr::{self, MotorFeedback, FRAME_LEN};
+use protocol::cdc;
 use sim::report;
 use sim::scenario::{self, Scenario};
 
@@ -26,19 +29,13 @@ struct Cli {
 }
 
 #[derive(Clone, Copy, ValueEnum)]
-enum Frame {
-    /// Seed 000 SPI command frame (Jetson → MCU), 64 bytes.
-    AmrCommand,
-    /// Seed 000 SPI feedback frame (MCU → Jetson), 64 bytes.
-    AmrFeedback,
-}
-
-#[derive(Clone, Copy, ValueEnum)]
 enum Kind {
     /// Linux spidev (seed 000), 2 MHz mode 0.
     Spi,
-    /// Serial / USB CDC.
+    /// Serial / USB CDC speaking seed 001 (`AA 55` frames): PING, IMU, STATUS, ACK.
     Serial,
+    /// Serial to a Teensy speaking seed 003 robust frames (COBS + CRC); monitor only listens.
+    Teensy,
 }
 
 #[derive(Subcommand)]
@@ -60,21 +57,29 @@ enum Cmd {
         #[arg(long)]
         list: bool,
     },
-    /// Decode one frame (hex, spaces allowed) to JSON.
+    /// Decode one frame (hex, spaces allowed) to JSON; cdc and teensy-robust also take a capture.
+    #[command(after_long_help = cli::SHAPES)]
     Decode {
         /// Frame type.
         #[arg(long, value_enum)]
-        frame: Frame,
+        frame: FrameKind,
         /// The bytes in hex (e.g. from a logic-analyser capture).
         hex: String,
+        /// Motors in a seed 003 CmdMsg (MAX_SUPPORTED_MTRS), 1 to 16.
+        #[arg(long, default_value_t = cli::DEFAULT_MOTORS)]
+        motors: usize,
     },
     /// Encode a JSON message to a frame in hex.
+    #[command(after_long_help = cli::SHAPES)]
     Encode {
         /// Frame type.
         #[arg(long, value_enum)]
-        frame: Frame,
-        /// The message as JSON (field names as `decode` prints them).
+        frame: FrameKind,
+        /// The message as JSON (field names as `decode` prints them; see --help).
         json: String,
+        /// Motors in a seed 003 CmdMsg (MAX_SUPPORTED_MTRS), 1 to 16.
+        #[arg(long, default_value_t = cli::DEFAULT_MOTORS)]
+        motors: usize,
     },
     /// Run the 1 kHz bridge disarmed against a device and print feedback and diagnostics.
     Monitor {
@@ -89,6 +94,9 @@ enum Cmd {
         /// How long, s.
         #[arg(long, default_value_t = 5.0)]
         seconds: f64,
+        /// Motors in a seed 003 CmdMsg (--kind teensy).
+        #[arg(long, default_value_t = cli::DEFAULT_MOTORS)]
+        motors: usize,
     },
     /// Exchange a few frames with a device and report round trip and clock offset.
     Ping {
@@ -112,127 +120,9 @@ enum Cmd {
     },
 }
 
-fn parse_hex(s: &str) -> Result<Vec<u8>, String> {
-    let clean: String = s
-        .chars()
-        .filter(|c| !c.is_whitespace() && *c != ':' && *c != ',')
-        .collect();
-    let clean = clean.strip_prefix("0x").unwrap_or(&clean);
-    if clean.len() % 2 != 0 {
-        return Err(format!(
-            "hex input has an odd number of digits ({}); give two digits per byte",
-            clean.len()
-        ));
-    }
-    (0..clean.len())
-        .step_by(2)
-        .map(|i| {
-            let pair = clean.get(i..i.saturating_add(2)).unwrap_or("");
-            u8::from_str_radix(pair, 16)
-                .map_err(|_| format!("'{pair}' at position {i} is not a hex byte"))
-        })
-        .collect()
-}
-
 /// A duration from user input: negative or NaN is zero, too large is a year.
 fn secs(s: f64) -> Duration {
     Duration::try_from_secs_f64(s.max(0.0)).unwrap_or(Duration::from_secs(365 * 24 * 3600))
-}
-
-fn to_hex(b: &[u8]) -> String {
-    b.iter().map(|x| format!("{x:02x}")).collect()
-}
-
-fn frame_array(bytes: &[u8]) -> Result<[u8; FRAME_LEN], String> {
-    <[u8; FRAME_LEN]>::try_from(bytes).map_err(|_| {
-        format!(
-            "an AMR frame is exactly {FRAME_LEN} bytes, got {}; capture one whole CS-low period",
-            bytes.len()
-        )
-    })
-}
-
-fn command_json(c: &MotorCommand) -> serde_json::Value {
-    serde_json::json!({
-        "timestamp_us": c.timestamp_us, "left_speed_cmd": c.left_speed_cmd,
-        "right_speed_cmd": c.right_speed_cmd, "control_mode": c.control_mode,
-        "enable": c.enable, "seq": c.seq,
-    })
-}
-
-fn feedback_json(f: &MotorFeedback) -> serde_json::Value {
-    serde_json::json!({
-        "timestamp_us": f.timestamp_us, "left_speed": f.left_speed, "right_speed": f.right_speed,
-        "left_current": f.left_current, "right_current": f.right_current,
-        "left_encoder": f.left_encoder, "right_encoder": f.right_encoder,
-        "fault_flags": f.fault_flags, "seq": f.seq, "mode": f.mode, "cmd_seq": f.cmd_seq,
-    })
-}
-
-fn get<T: serde::de::DeserializeOwned + Default>(
-    v: &serde_json::Value,
-    key: &str,
-) -> Result<T, String> {
-    match v.get(key) {
-        None => Ok(T::default()),
-        Some(x) => serde_json::from_value(x.clone()).map_err(|e| format!("field '{key}': {e}")),
-    }
-}
-
-fn decode(frame: Frame, hex: &str) -> Result<(), String> {
-    let bytes = frame_array(&parse_hex(hex)?)?;
-    let json = match frame {
-        Frame::AmrCommand => amr::decode_command(&bytes).map(|c| command_json(&c)),
-        Frame::AmrFeedback => amr::decode_feedback(&bytes).map(|f| feedback_json(&f)),
-    }
-    .map_err(|r| format!("frame refused: {r:?} (code {}); a CRC error means the capture is misaligned or corrupted", r as u8))?;
-    println!(
-        "{}",
-        serde_json::to_string_pretty(&json).map_err(|e| e.to_string())?
-    );
-    Ok(())
-}
-
-fn encode(frame: Frame, json: &str) -> Result<(), String> {
-    let v: serde_json::Value =
-        serde_json::from_str(json).map_err(|e| format!("not valid JSON: {e}"))?;
-    if !v.is_object() {
-        return Err(
-            "give a JSON object, e.g. '{\"left_speed_cmd\": 1.0, \"enable\": true}'".into(),
-        );
-    }
-    let mut out = [0u8; FRAME_LEN];
-    match frame {
-        Frame::AmrCommand => {
-            let c = MotorCommand {
-                timestamp_us: get(&v, "timestamp_us")?,
-                left_speed_cmd: get(&v, "left_speed_cmd")?,
-                right_speed_cmd: get(&v, "right_speed_cmd")?,
-                control_mode: get(&v, "control_mode")?,
-                enable: get(&v, "enable")?,
-                seq: get(&v, "seq")?,
-            };
-            amr::encode_command(&c, &mut out);
-        }
-        Frame::AmrFeedback => {
-            let f = MotorFeedback {
-                timestamp_us: get(&v, "timestamp_us")?,
-                left_speed: get(&v, "left_speed")?,
-                right_speed: get(&v, "right_speed")?,
-                left_current: get(&v, "left_current")?,
-                right_current: get(&v, "right_current")?,
-                left_encoder: get(&v, "left_encoder")?,
-                right_encoder: get(&v, "right_encoder")?,
-                fault_flags: get(&v, "fault_flags")?,
-                seq: get(&v, "seq")?,
-                mode: get(&v, "mode")?,
-                cmd_seq: get(&v, "cmd_seq")?,
-            };
-            amr::encode_feedback(&f, &mut out);
-        }
-    }
-    println!("{}", to_hex(&out));
-    Ok(())
 }
 
 fn load_scenarios(args: &[String]) -> Result<Vec<Scenario>, String> {
@@ -322,14 +212,102 @@ fn short(s: &str) -> String {
     first.chars().take(90).collect()
 }
 
-fn open(kind: Kind, device: &str, speed: u32) -> Result<Box<dyn Transport>, String> {
-    Ok(match kind {
-        Kind::Spi => Box::new(SpiTransport::open(device, speed).map_err(|e| e.to_string())?),
-        Kind::Serial => Box::new(
-            SerialTransport::open(device, speed, Duration::from_millis(20))
-                .map_err(|e| e.to_string())?,
-        ),
-    })
+fn open_spi(device: &str, speed: u32) -> Result<Box<dyn Transport>, String> {
+    Ok(Box::new(
+        SpiTransport::open(device, speed).map_err(|e| e.to_string())?,
+    ))
+}
+
+fn open_serial(device: &str, baud: u32) -> Result<SerialTransport, String> {
+    SerialTransport::open(device, baud, Duration::from_millis(20)).map_err(|e| e.to_string())
+}
+
+fn elapsed_ms(t0: Instant) -> u64 {
+    u64::try_from(t0.elapsed().as_millis()).unwrap_or(u64::MAX)
+}
+
+/// Seed 001: PING every 100 ms, print every received message with the ladder event it maps to.
+fn monitor_cdc(device: &str, baud: u32, seconds: f64) -> Result<(), String> {
+    let mut link = CdcLink::new(open_serial(device, baud)?);
+    let t0 = Instant::now();
+    let end = t0.checked_add(secs(seconds)).unwrap_or(t0);
+    let mut last_ping: Option<Instant> = None;
+    while Instant::now() < end {
+        if last_ping.is_none_or(|t| t.elapsed() >= Duration::from_millis(100)) {
+            link.send(&cdc::Message::Ping).map_err(|e| e.to_string())?;
+            last_ping = Some(Instant::now());
+        }
+        for m in link.poll().map_err(|e| e.to_string())? {
+            let event = m.to_event().map(|e| format!("{e:?}"));
+            println!(
+                "{}",
+                serde_json::json!({"t_ms": elapsed_ms(t0), "message": cli::CdcJson::from(m), "event": event})
+            );
+        }
+        for e in link.errors.drain(..) {
+            println!(
+                "{}",
+                serde_json::json!({"t_ms": elapsed_ms(t0), "error": format!("{e:?}"), "code": e as u8,
+                    "reason": format!("{:?}", e.reason()), "reason_code": e.reason() as u8})
+            );
+        }
+    }
+    eprintln!(
+        "{}",
+        serde_json::json!({"device": device, "stats": link.stats()})
+    );
+    Ok(())
+}
+
+/// Seed 003: listen and print every robust frame received.
+fn monitor_teensy<const N: usize>(device: &str, baud: u32, seconds: f64) -> Result<(), String> {
+    let mut link = TeensyLink::<_, N>::new(open_serial(device, baud)?);
+    let t0 = Instant::now();
+    let end = t0.checked_add(secs(seconds)).unwrap_or(t0);
+    while Instant::now() < end {
+        for m in link.poll().map_err(|e| e.to_string())? {
+            println!(
+                "{}",
+                serde_json::json!({"t_ms": elapsed_ms(t0), "message": cli::CmdMsgJson::from(&m)})
+            );
+        }
+        for r in link.errors.drain(..) {
+            println!(
+                "{}",
+                serde_json::json!({"t_ms": elapsed_ms(t0), "reason": format!("{r:?}"), "reason_code": r as u8})
+            );
+        }
+    }
+    eprintln!(
+        "{}",
+        serde_json::json!({"device": device, "stats": link.stats()})
+    );
+    Ok(())
+}
+
+fn ping_cdc(device: &str, baud: u32, count: u32) -> Result<(), String> {
+    let mut link = CdcLink::new(open_serial(device, baud)?);
+    let mut ok = 0u32;
+    for i in 0..count {
+        match link.ping(Duration::from_millis(200)) {
+            Ok(r) => {
+                ok = ok.saturating_add(1);
+                println!(
+                    "{i}: {} us, reply {}",
+                    r.round_trip.as_micros(),
+                    serde_json::json!(cli::CdcJson::from(r.reply))
+                );
+            }
+            Err(e) => println!("{i}: {e}"),
+        }
+    }
+    eprintln!("{}", serde_json::json!({"stats": link.stats()}));
+    if ok == 0 {
+        return Err(format!(
+            "no ACK or STATUS from {device} in {count} PINGs: check the baud rate and that the firmware speaks seed 001"
+        ));
+    }
+    Ok(())
 }
 
 struct Boxed(Box<dyn Transport>);
@@ -342,8 +320,29 @@ impl Transport for Boxed {
     }
 }
 
-fn monitor(device: &str, kind: Kind, speed: u32, seconds: f64) -> Result<(), String> {
-    let t = open(kind, device, speed)?;
+fn monitor(
+    device: &str,
+    kind: Kind,
+    speed: u32,
+    seconds: f64,
+    motors: usize,
+) -> Result<(), String> {
+    match kind {
+        Kind::Spi => {}
+        Kind::Serial => return monitor_cdc(device, speed, seconds),
+        Kind::Teensy => {
+            return match motors {
+                1 => monitor_teensy::<1>(device, speed, seconds),
+                2 => monitor_teensy::<2>(device, speed, seconds),
+                3 => monitor_teensy::<3>(device, speed, seconds),
+                4 => monitor_teensy::<4>(device, speed, seconds),
+                6 => monitor_teensy::<6>(device, speed, seconds),
+                8 => monitor_teensy::<8>(device, speed, seconds),
+                n => Err(format!("--motors {n}: monitor supports 1, 2, 3, 4, 6, 8")),
+            }
+        }
+    }
+    let t = open_spi(device, speed)?;
     let mut link = Link::new(Boxed(t), Bridge::new(BridgeConfig::DEFAULT));
     let mut last_print = 0u64;
     let end = std::time::Instant::now()
@@ -358,10 +357,7 @@ fn monitor(device: &str, kind: Kind, speed: u32, seconds: f64) -> Result<(), Str
         if now.saturating_sub(last_print) >= 100_000 {
             last_print = now;
             if let Some(fb) = link.bridge.last_feedback {
-                println!(
-                    "{}",
-                    serde_json::json!({"t_us": now, "feedback": feedback_json(&fb)})
-                );
+                println!("{}", serde_json::json!({"t_us": now, "feedback": fb}));
             }
         }
     }
@@ -370,7 +366,16 @@ fn monitor(device: &str, kind: Kind, speed: u32, seconds: f64) -> Result<(), Str
 }
 
 fn ping(device: &str, kind: Kind, speed: u32, count: u32) -> Result<(), String> {
-    let t = open(kind, device, speed)?;
+    match kind {
+        Kind::Spi => {}
+        Kind::Serial => return ping_cdc(device, speed, count),
+        Kind::Teensy => {
+            return Err(
+                "ping speaks seed 001 (--kind serial) or seed 000 (--kind spi); a Teensy has no probe message: use monitor --kind teensy".into(),
+            )
+        }
+    }
+    let t = open_spi(device, speed)?;
     let mut link = Link::new(Boxed(t), Bridge::new(BridgeConfig::DEFAULT));
     let mut ok = 0u32;
     for i in 0..count {
@@ -450,14 +455,25 @@ fn main() -> ExitCode {
                 run_sim(&scenarios, &out, duration, !no_plots)
             }
         }
-        Cmd::Decode { frame, hex } => decode(frame, &hex).map(|()| true),
-        Cmd::Encode { frame, json } => encode(frame, &json).map(|()| true),
+        Cmd::Decode { frame, hex, motors } => cli::decode(frame, &hex, motors).map(|s| {
+            println!("{s}");
+            true
+        }),
+        Cmd::Encode {
+            frame,
+            json,
+            motors,
+        } => cli::encode(frame, &json, motors).map(|s| {
+            println!("{s}");
+            true
+        }),
         Cmd::Monitor {
             device,
             kind,
             speed,
             seconds,
-        } => monitor(&device, kind, speed, seconds).map(|()| true),
+            motors,
+        } => monitor(&device, kind, speed, seconds, motors).map(|()| true),
         Cmd::Ping {
             device,
             kind,

@@ -14,6 +14,8 @@ pub enum LinkError {
     Io(String, std::io::Error),
     /// Nothing (or not enough) came back in time.
     Timeout(String, usize),
+    /// A serial request got no matching reply in time (device, what was expected).
+    NoReply(String, String),
 }
 
 impl core::fmt::Display for LinkError {
@@ -25,6 +27,7 @@ impl core::fmt::Display for LinkError {
             ),
             Self::Configure(dev, e) => write!(f, "cannot configure {dev}: {e}. Check that the driver supports mode 0, 8 bits, 2 MHz"),
             Self::Io(dev, e) => write!(f, "transfer on {dev} failed: {e}. Check the cable and that the MCU is powered"),
+            Self::NoReply(dev, what) => write!(f, "{dev}: no {what} before the timeout. Check that the firmware runs, the baud rate, and that the device speaks this protocol"),
             Self::Timeout(dev, n) => write!(f, "{dev}: only {n} bytes came back before the timeout. Check that the MCU firmware is running and the baud rate / wiring"),
         }
     }
@@ -121,6 +124,84 @@ impl Transport for SerialTransport {
 
     fn name(&self) -> &str {
         &self.path
+    }
+}
+
+/// A byte stream with a read timeout: the serial links (seed 001, seed 003), whose frames carry
+/// their own delimiters, so reads return whatever has arrived rather than a fixed-size reply.
+pub trait ByteStream {
+    /// Writes every byte.
+    fn write_all(&mut self, bytes: &[u8]) -> Result<(), LinkError>;
+    /// Reads what has arrived into `buf`, waiting at most the stream's timeout; `Ok(0)` if nothing came.
+    fn read_some(&mut self, buf: &mut [u8]) -> Result<usize, LinkError>;
+    /// The device name, for messages.
+    fn name(&self) -> &str;
+}
+
+impl ByteStream for SerialTransport {
+    fn write_all(&mut self, bytes: &[u8]) -> Result<(), LinkError> {
+        self.port
+            .write_all(bytes)
+            .map_err(|e| LinkError::Io(self.path.clone(), e))
+    }
+
+    fn read_some(&mut self, buf: &mut [u8]) -> Result<usize, LinkError> {
+        match self.port.read(buf) {
+            Ok(n) => Ok(n),
+            Err(e) if e.kind() == std::io::ErrorKind::TimedOut => Ok(0),
+            Err(e) => Err(LinkError::Io(self.path.clone(), e)),
+        }
+    }
+
+    fn name(&self) -> &str {
+        &self.path
+    }
+}
+
+/// An in-memory stream for tests: every write releases the next scripted reply, which is then
+/// read back in chunks of at most `chunk` bytes (so frames arrive split across reads).
+#[derive(Debug, Default)]
+pub struct ScriptedStream {
+    /// Everything written so far.
+    pub written: Vec<u8>,
+    /// Replies still to come, one per write.
+    pub replies: std::collections::VecDeque<Vec<u8>>,
+    /// Bytes released and not yet read.
+    pub pending: std::collections::VecDeque<u8>,
+    /// Largest read, bytes (0 is taken as 1).
+    pub chunk: usize,
+}
+
+impl ScriptedStream {
+    /// A stream that answers the n-th write with `replies[n]`, `chunk` bytes per read.
+    pub fn new(replies: Vec<Vec<u8>>, chunk: usize) -> Self {
+        Self {
+            replies: replies.into(),
+            chunk,
+            ..Self::default()
+        }
+    }
+}
+
+impl ByteStream for ScriptedStream {
+    fn write_all(&mut self, bytes: &[u8]) -> Result<(), LinkError> {
+        self.written.extend_from_slice(bytes);
+        if let Some(r) = self.replies.pop_front() {
+            self.pending.extend(r);
+        }
+        Ok(())
+    }
+
+    fn read_some(&mut self, buf: &mut [u8]) -> Result<usize, LinkError> {
+        let n = buf.len().min(self.chunk.max(1)).min(self.pending.len());
+        for (d, s) in buf.iter_mut().zip(self.pending.drain(..n)) {
+            *d = s;
+        }
+        Ok(n)
+    }
+
+    fn name(&self) -> &str {
+        "scripted"
     }
 }
 

@@ -176,6 +176,11 @@ const _: () = assert!(PROTOCOL_VERSION >= 1 && PROTOCOL_VERSION < 0x80);
 /// Jetson → MCU, every 1 ms (seed 000 `MotorCommand`, plus sequence and version).
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
+#[cfg_attr(
+    feature = "serde",
+    derive(serde::Serialize, serde::Deserialize),
+    serde(default, deny_unknown_fields)
+)]
 pub struct MotorCommand {
     /// Jetson's microsecond clock when the command was built.
     pub timestamp_us: u32,
@@ -195,6 +200,11 @@ pub struct MotorCommand {
 /// MCU → Jetson, in the same transaction (seed 000 `MotorFeedback`, plus sequence, mode and version).
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
+#[cfg_attr(
+    feature = "serde",
+    derive(serde::Serialize, serde::Deserialize),
+    serde(default, deny_unknown_fields)
+)]
 pub struct MotorFeedback {
     /// MCU's microsecond clock when the frame was prepared.
     pub timestamp_us: u32,

@@ -177,6 +177,11 @@ impl Error {
 /// `SET_MOTOR_PWM` payload: four signed duties in [-1000, 1000] and a command timeout.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
+#[cfg_attr(
+    feature = "serde",
+    derive(serde::Serialize, serde::Deserialize),
+    serde(default, deny_unknown_fields)
+)]
 pub struct SetMotorPwm {
     /// pwm_m1 … pwm_m4 (TIM8 CH1 … CH4); the seed recommends [-1000, 1000].
     pub pwm: [i16; 4],
@@ -211,6 +216,11 @@ impl SetMotorPwm {
 /// `IMU_MPU6050` payload: raw MPU6050 readings.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
+#[cfg_attr(
+    feature = "serde",
+    derive(serde::Serialize, serde::Deserialize),
+    serde(default, deny_unknown_fields)
+)]
 pub struct Imu {
     /// MCU milliseconds since power-on.
     pub t_ms: u32,
@@ -225,6 +235,11 @@ pub struct Imu {
 /// `STATUS.flags` bits.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
+#[cfg_attr(
+    feature = "serde",
+    derive(serde::Serialize, serde::Deserialize),
+    serde(transparent)
+)]
 pub struct StatusFlags(pub u16);
 
 impl StatusFlags {
@@ -246,6 +261,11 @@ impl StatusFlags {
 /// `STATUS` payload.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
+#[cfg_attr(
+    feature = "serde",
+    derive(serde::Serialize, serde::Deserialize),
+    serde(default, deny_unknown_fields)
+)]
 pub struct Status {
     /// MCU milliseconds since power-on.
     pub t_ms: u32,
@@ -260,6 +280,11 @@ pub struct Status {
 /// `ACK` payload.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
+#[cfg_attr(
+    feature = "serde",
+    derive(serde::Serialize, serde::Deserialize),
+    serde(default, deny_unknown_fields)
+)]
 pub struct Ack {
     /// The MSG_ID acknowledged.
     pub msg_id: u8,
@@ -460,6 +485,11 @@ pub fn decode_frame(bytes: &[u8]) -> Result<Message, Error> {
 /// What a [`StreamDecoder`] has seen (saturating counters).
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
+#[cfg_attr(
+    feature = "serde",
+    derive(serde::Serialize, serde::Deserialize),
+    serde(default, deny_unknown_fields)
+)]
 pub struct Stats {
     /// Frames delivered as messages.
     pub frames: u32,

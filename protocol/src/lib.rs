@@ -15,6 +15,11 @@
 //! Every decoder is total: for every input it returns `Ok` or a typed error. The harnesses in each
 //! module's `verification` submodule state this (and round-trips, and bit-flip detection) for Kani
 //! and run as `cargo test` twins; `tests/fuzz.rs` fuzzes every decoder with bolero.
+//!
+//! Feature `serde` (no_std, no alloc) derives `Serialize`/`Deserialize` on the plain message structs
+//! (missing fields default to zero, unknown fields are refused); the host tools use it for JSON.
+//! Types holding `statemachine` enums or const-generic arrays (`cdc::Message`, `teensy::CmdMsg`)
+//! are converted by hand on the host.
 #![no_std]
 #![forbid(unsafe_code)]
 #![cfg_attr(

@@ -107,6 +107,11 @@ const _: () = assert!(RX_KINEMATICS_OFFSET == RX_PID_OFFSET + MotorPidSettings::
 /// One-shot update flags of `RxBuffer.updates` (bits 0–5; the parity bit 7 is added by the encoder).
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
+#[cfg_attr(
+    feature = "serde",
+    derive(serde::Serialize, serde::Deserialize),
+    serde(transparent)
+)]
 pub struct UpdateFlags(pub u8);
 
 impl UpdateFlags {
@@ -146,6 +151,11 @@ pub const fn updates_word(flags: UpdateFlags) -> u32 {
 /// `RxBuffer.systemShutdown`.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
+#[cfg_attr(
+    feature = "serde",
+    derive(serde::Serialize, serde::Deserialize),
+    serde(default, deny_unknown_fields)
+)]
 pub struct Shutdown {
     /// Bit 0 (`SHUTDOWN_SERVO`): disable the servos.
     pub servos: bool,
@@ -174,6 +184,11 @@ pub const fn shutdown_raw(buf: &[u8; RX_LEN]) -> Shutdown {
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
 #[repr(u8)]
+#[cfg_attr(
+    feature = "serde",
+    derive(serde::Serialize, serde::Deserialize),
+    serde(rename_all = "snake_case")
+)]
 pub enum MotorMode {
     /// PWM off, H-bridge low (coast).
     #[default]
@@ -206,6 +221,11 @@ impl MotorMode {
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
 #[repr(u8)]
+#[cfg_attr(
+    feature = "serde",
+    derive(serde::Serialize, serde::Deserialize),
+    serde(rename_all = "snake_case")
+)]
 pub enum ServoMode {
     /// PWM stopped; the 6 V rail is cut if all four servos are fully disabled.
     #[default]
@@ -273,6 +293,11 @@ pub const fn unpack_servo_modes(byte: u8) -> Option<[ServoMode; 4]> {
 /// `MotorData`: BEMF readings, positions, done flags.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
+#[cfg_attr(
+    feature = "serde",
+    derive(serde::Serialize, serde::Deserialize),
+    serde(default, deny_unknown_fields)
+)]
 pub struct MotorData {
     /// Filtered instantaneous BEMF.
     pub bemf: [i32; 4],
@@ -285,6 +310,11 @@ pub struct MotorData {
 /// `ImuData`: the IMU fusion output.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
+#[cfg_attr(
+    feature = "serde",
+    derive(serde::Serialize, serde::Deserialize),
+    serde(default, deny_unknown_fields)
+)]
 pub struct ImuData {
     /// World-frame angular velocity.
     pub gyro: SensorData,
@@ -307,6 +337,11 @@ pub struct ImuData {
 /// `OdometryData`: world-frame pose and body-frame velocity.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
+#[cfg_attr(
+    feature = "serde",
+    derive(serde::Serialize, serde::Deserialize),
+    serde(default, deny_unknown_fields)
+)]
 pub struct OdometryData {
     /// m, world frame.
     pub pos_x: f32,
@@ -325,6 +360,11 @@ pub struct OdometryData {
 /// STM32 → Pi sensor buffer (`transferVersion` is implicit: written as 15, checked on decode).
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
+#[cfg_attr(
+    feature = "serde",
+    derive(serde::Serialize, serde::Deserialize),
+    serde(default, deny_unknown_fields)
+)]
 pub struct TxBuffer {
     /// µs timestamp of the transfer.
     pub update_time: u32,
@@ -345,6 +385,11 @@ pub struct TxBuffer {
 /// Pi → STM32 command buffer (`transferVersion` implicit; the parity bit is computed by the encoder).
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
+#[cfg_attr(
+    feature = "serde",
+    derive(serde::Serialize, serde::Deserialize),
+    serde(default, deny_unknown_fields)
+)]
 pub struct RxBuffer {
     /// One-shot update flags.
     pub updates: UpdateFlags,

@@ -76,6 +76,11 @@ pub const ROBUST_BUF: usize = robust_max_len(MAX_MOTORS);
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
 #[repr(i32)]
+#[cfg_attr(
+    feature = "serde",
+    derive(serde::Serialize, serde::Deserialize),
+    serde(rename_all = "snake_case")
+)]
 pub enum CmdType {
     /// Actuate the motors.
     #[default]
@@ -267,6 +272,11 @@ impl<const N: usize> CmdMsg<N> {
 /// What a [`RobustDecoder`] has seen (saturating counters).
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
+#[cfg_attr(
+    feature = "serde",
+    derive(serde::Serialize, serde::Deserialize),
+    serde(default, deny_unknown_fields)
+)]
 pub struct RobustStats {
     /// Commands delivered.
     pub frames: u32,

@@ -19,6 +19,11 @@ use crate::le;
 /// A 3-axis IMU reading with its MPL accuracy level.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
+#[cfg_attr(
+    feature = "serde",
+    derive(serde::Serialize, serde::Deserialize),
+    serde(default, deny_unknown_fields)
+)]
 pub struct SensorData {
     /// x component.
     pub x: f32,
@@ -33,6 +38,11 @@ pub struct SensorData {
 /// The DMP 6-axis orientation quaternion.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
+#[cfg_attr(
+    feature = "serde",
+    derive(serde::Serialize, serde::Deserialize),
+    serde(default, deny_unknown_fields)
+)]
 pub struct QuaternionData {
     /// Scalar part.
     pub w: f32,
@@ -47,6 +57,11 @@ pub struct QuaternionData {
 /// PID gains for the four motors.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
+#[cfg_attr(
+    feature = "serde",
+    derive(serde::Serialize, serde::Deserialize),
+    serde(default, deny_unknown_fields)
+)]
 pub struct MotorPidSettings {
     /// Proportional gains, motors 0–3.
     pub kp: [f32; 4],
@@ -59,6 +74,11 @@ pub struct MotorPidSettings {
 /// Wheel geometry for odometry: body twist from wheel speeds, and encoder scaling.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
+#[cfg_attr(
+    feature = "serde",
+    derive(serde::Serialize, serde::Deserialize),
+    serde(default, deny_unknown_fields)
+)]
 pub struct KinematicsConfig {
     /// Rows vx, vy, wz; columns wheels 0–3: body twist = inverse × wheel speeds (rad/s).
     pub inverse: [[f32; 4]; 3],
