@@ -4,6 +4,21 @@ use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 use std::time::{Duration, Instant};
 
+/// `println!` that never panics: a closed pipe (`motorlink decode … | head`) ends the program quietly,
+/// any other write error ends it with a message and exit code 1.
+macro_rules! out {
+    ($($arg:tt)*) => {{
+        use std::io::Write as _;
+        if let Err(e) = writeln!(std::io::stdout().lock(), $($arg)*) {
+            if e.kind() == std::io::ErrorKind::BrokenPipe {
+                std::process::exit(0);
+            }
+            eprintln!("motorlink: cannot write to standard output: {e}");
+            std::process::exit(1);
+        }
+    }};
+}
+
 use clap::{Parser, Subcommand, ValueEnum};
 use motorlink::bridge::{Bridge, BridgeConfig};
 use motorlink::cli::{self, FrameKind};
@@ -200,7 +215,7 @@ fn run_sim(
     };
     write("summary.txt", &table)?;
     write("summary.csv", &report::csv(&results))?;
-    println!(
+    out!(
         "\ntraces, plots and summary in {}/ (summary.txt, summary.csv, <scenario>.csv, <scenario>.svg)",
         out.display()
     );
@@ -239,13 +254,13 @@ fn monitor_cdc(device: &str, baud: u32, seconds: f64) -> Result<(), String> {
         }
         for m in link.poll().map_err(|e| e.to_string())? {
             let event = m.to_event().map(|e| format!("{e:?}"));
-            println!(
+            out!(
                 "{}",
                 serde_json::json!({"t_ms": elapsed_ms(t0), "message": cli::CdcJson::from(m), "event": event})
             );
         }
         for e in link.errors.drain(..) {
-            println!(
+            out!(
                 "{}",
                 serde_json::json!({"t_ms": elapsed_ms(t0), "error": format!("{e:?}"), "code": e as u8,
                     "reason": format!("{:?}", e.reason()), "reason_code": e.reason() as u8})
@@ -266,13 +281,13 @@ fn monitor_teensy<const N: usize>(device: &str, baud: u32, seconds: f64) -> Resu
     let end = t0.checked_add(secs(seconds)).unwrap_or(t0);
     while Instant::now() < end {
         for m in link.poll().map_err(|e| e.to_string())? {
-            println!(
+            out!(
                 "{}",
                 serde_json::json!({"t_ms": elapsed_ms(t0), "message": cli::CmdMsgJson::from(&m)})
             );
         }
         for r in link.errors.drain(..) {
-            println!(
+            out!(
                 "{}",
                 serde_json::json!({"t_ms": elapsed_ms(t0), "reason": format!("{r:?}"), "reason_code": r as u8})
             );
@@ -292,13 +307,13 @@ fn ping_cdc(device: &str, baud: u32, count: u32) -> Result<(), String> {
         match link.ping(Duration::from_millis(200)) {
             Ok(r) => {
                 ok = ok.saturating_add(1);
-                println!(
+                out!(
                     "{i}: {} us, reply {}",
                     r.round_trip.as_micros(),
                     serde_json::json!(cli::CdcJson::from(r.reply))
                 );
             }
-            Err(e) => println!("{i}: {e}"),
+            Err(e) => out!("{i}: {e}"),
         }
     }
     eprintln!("{}", serde_json::json!({"stats": link.stats()}));
@@ -351,13 +366,13 @@ fn monitor(
     while std::time::Instant::now() < end {
         let diags = link.cycle().map_err(|e| e.to_string())?;
         for (t, d) in diags {
-            println!("{}", serde_json::json!({"t_us": t, "diagnostic": d}));
+            out!("{}", serde_json::json!({"t_us": t, "diagnostic": d}));
         }
         let now = link.now_us();
         if now.saturating_sub(last_print) >= 100_000 {
             last_print = now;
             if let Some(fb) = link.bridge.last_feedback {
-                println!("{}", serde_json::json!({"t_us": now, "feedback": fb}));
+                out!("{}", serde_json::json!({"t_us": now, "feedback": fb}));
             }
         }
     }
@@ -386,7 +401,7 @@ fn ping(device: &str, kind: Kind, speed: u32, count: u32) -> Result<(), String> 
             Ok(_) => match link.bridge.last_feedback {
                 Some(fb) => {
                     ok = ok.saturating_add(1);
-                    println!(
+                    out!(
                         "{i}: {} us, MCU time {} us, mode {}, faults {:#06x}, offset estimate {:?} us",
                         t1.saturating_sub(t0),
                         fb.timestamp_us,
@@ -395,9 +410,9 @@ fn ping(device: &str, kind: Kind, speed: u32, count: u32) -> Result<(), String> 
                         link.bridge.clock.offset_at(t1 as f64).map(|o| o.round())
                     );
                 }
-                None => println!("{i}: reply did not decode (see diagnostics)"),
+                None => out!("{i}: reply did not decode (see diagnostics)"),
             },
-            Err(e) => println!("{i}: {e}"),
+            Err(e) => out!("{i}: {e}"),
         }
     }
     if ok == 0 {
@@ -423,8 +438,8 @@ fn loop_bench(seconds: f64) -> Result<(), String> {
     link.run_for(secs(seconds), |_| {})
         .map_err(|e| e.to_string())?;
     let s = &link.pacer.stats;
-    println!("{}", s.summary());
-    println!(
+    out!("{}", s.summary());
+    out!(
         "{}",
         serde_json::json!({"impl": "rust-absolute-deadline", "seconds": seconds, "periods": s.count,
             "misses": s.misses, "miss_rate": s.miss_rate(), "mean_us": s.mean_us(), "std_us": s.std_us(),
@@ -448,7 +463,7 @@ fn main() -> ExitCode {
                     let d = Scenario::from_toml(text, n)
                         .map(|s| s.description)
                         .unwrap_or_default();
-                    println!("{n:20} {d}");
+                    out!("{n:20} {d}");
                 }
                 Ok(true)
             } else {
@@ -456,7 +471,7 @@ fn main() -> ExitCode {
             }
         }
         Cmd::Decode { frame, hex, motors } => cli::decode(frame, &hex, motors).map(|s| {
-            println!("{s}");
+            out!("{s}");
             true
         }),
         Cmd::Encode {
@@ -464,7 +479,7 @@ fn main() -> ExitCode {
             json,
             motors,
         } => cli::encode(frame, &json, motors).map(|s| {
-            println!("{s}");
+            out!("{s}");
             true
         }),
         Cmd::Monitor {
