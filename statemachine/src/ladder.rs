@@ -259,7 +259,8 @@ impl Ladder {
         let mode_ok = match self.mode {
             Mode::Normal | Mode::Reduced => self.age < p.hold_after,
             Mode::Hold => self.age < p.stop_after,
-            Mode::Stop => self.age < p.brake_after,
+            // STOP's bound (age < brake_after) is the unlatched clause below.
+            Mode::Stop => true,
             Mode::Brake => self.applied == [Speed::ZERO; 2],
         };
         applied_ok
