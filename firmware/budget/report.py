@@ -11,6 +11,19 @@ RATES = {"current_loop handler (ADC)": 20_000, "speed_pid handler (TIM5)": 10_00
 CPI = 2.0
 
 
+def short(name):
+    """A function name without its generic arguments (`any<u8, …>` → `any`)."""
+    out, depth = [], 0
+    for ch in name:
+        if ch == "<":
+            depth += 1
+        elif ch == ">" and depth > 0:
+            depth -= 1
+        elif depth == 0:
+            out.append(ch)
+    return "".join(out)
+
+
 def sizes(path):
     sec = {}
     for line in open(path):
@@ -52,6 +65,30 @@ def main(size_path, counts_path):
     out.append(f"Per received frame (CRC + decode + validate + ladder step): **{frame} instructions** "
                f"(target < 1000; seed budget 3360 cycles = 20 µs). With the feedback frame: {frame + fb}.")
     out.append("")
+    out.append("### Where the instructions go\n")
+    out.append("Instructions per call by function, averaged over the sampled calls (code inlined into a")
+    out.append("caller is counted in the inlined function, by the debug info; `?` has no debug info).\n")
+    for name in ("frame: on_frame (CRC + decode + validate + ladder step)",
+                 "tick: on_tick (conditions + ladder step)"):
+        prof = counts.get(name, {}).get("by_function")
+        if not prof:
+            continue
+        out.append(f"{name}:\n")
+        out.append("| function | instructions |\n|---|---|")
+        shown = 0
+        rest = 0
+        merged = {}
+        for fn, k in prof.items():
+            merged[short(fn)] = merged.get(short(fn), 0) + k
+        for fn, k in sorted(merged.items(), key=lambda x: -x[1]):
+            if shown < 12 and k > 0:
+                out.append(f"| `{fn}` | {k} |")
+                shown += 1
+            else:
+                rest += k
+        if rest:
+            out.append(f"| (others) | {rest} |")
+        out.append("")
     out.append("## CPU load at 168 MHz\n")
     out.append(f"Assuming {CPI} cycles per instruction on average (pessimistic for this code):\n")
     out.append("| load | rate, Hz | instructions | cycles/s | share |\n|---|---|---|---|---|")
