@@ -265,10 +265,22 @@ fn open(frame: &[u8; FRAME_LEN]) -> Result<&[u8], RejectReason> {
     let end = PAYLOAD_OFFSET.saturating_add(len);
     let payload = body.get(PAYLOAD_OFFSET..end).ok_or(RejectReason::Framing)?;
     let padding = body.get(end..).ok_or(RejectReason::Framing)?;
-    if padding.iter().any(|&b| b != 0) {
+    if !all_zero(padding) {
         return Err(RejectReason::Framing);
     }
     Ok(payload)
+}
+
+/// True if every byte of `bytes` is zero. A word at a time: the padding is most of the frame.
+fn all_zero(bytes: &[u8]) -> bool {
+    let words = bytes.chunks_exact(4);
+    let tail = words.remainder().iter().fold(0u8, |acc, &b| acc | b);
+    let ored = words.fold(0u32, |acc, w| {
+        let mut word = [0u8; 4];
+        word.copy_from_slice(w);
+        acc | u32::from_ne_bytes(word)
+    });
+    ored == 0 && tail == 0
 }
 
 /// Encodes `cmd` into a complete frame (length, payload, zero padding, CRC); `protocol_version` is

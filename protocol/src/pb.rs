@@ -177,7 +177,23 @@ impl<'a> Reader<'a> {
     }
 
     /// A varint of at most 10 bytes whose value fits 64 bits.
+    ///
+    /// Every key and every small value (mode, enable, version) of these messages is one byte:
+    /// that case is inlined into the caller, longer varints take the out-of-line loop.
+    #[inline(always)]
     fn varint(&mut self) -> Result<u64, DecodeError> {
+        match self.rest.split_first() {
+            Some((&b, tail)) if b & 0x80 == 0 => {
+                self.rest = tail;
+                Ok(u64::from(b))
+            }
+            _ => self.varint_long(),
+        }
+    }
+
+    /// [`Self::varint`] for two bytes or more (or none left).
+    #[inline(never)]
+    fn varint_long(&mut self) -> Result<u64, DecodeError> {
         let mut value: u64 = 0;
         for i in 0..10u32 {
             let (&b, tail) = self.rest.split_first().ok_or(DecodeError)?;
@@ -220,9 +236,8 @@ impl<'a> Reader<'a> {
                 Value::Len
             }
             WT_I32 => {
-                let b = self.take(4)?;
-                let mut w = [0u8; 4];
-                w.copy_from_slice(b);
+                let (&w, tail) = self.rest.split_first_chunk::<4>().ok_or(DecodeError)?;
+                self.rest = tail;
                 Value::I32(u32::from_le_bytes(w))
             }
             _ => return Err(DecodeError),
