@@ -35,7 +35,12 @@ def sizes(path):
     return sec, flash, ram
 
 
-def main(size_path, counts_path):
+# Per-frame instruction counts before and after the receive-path work (same frames, same method).
+HISTORY = ("Per-frame history: 1,896 instructions (crc `Table<1>`, generic varint loop, bytewise padding "
+           "check) → the figure above (slice-by-16 CRC, one-byte varints inlined, padding a word at a time).")
+
+
+def main(size_path, counts_path, stack_path=None):
     sec, flash, ram = sizes(size_path)
     counts = json.load(open(counts_path))
     out = []
@@ -49,7 +54,7 @@ def main(size_path, counts_path):
             out.append(f"| {s} | {sec[s]} |")
     out.append(f"| **flash** (vector table + text + rodata + data) | **{flash}** of 1 048 576 ({100*flash/1048576:.1f} %) |")
     out.append(f"| **static RAM** (data + bss + uninit: the defmt RTT buffer) | **{ram}** of 131 072 ({100*ram/131072:.1f} %) |")
-    out.append("\nThe stack is the rest of RAM below the statics (flip-link), far above the measured use below.\n")
+    out.append("\nThe stack is the rest of RAM below the statics (flip-link), far above the bounds below.\n")
     out.append("## Executed instructions (min / max over the sampled calls)\n")
     out.append("| unit | instructions | own stack, bytes |\n|---|---|---|")
     mx = {}
@@ -64,6 +69,8 @@ def main(size_path, counts_path):
     out.append("")
     out.append(f"Per received frame (CRC + decode + validate + ladder step): **{frame} instructions** "
                f"(target < 1000; seed budget 3360 cycles = 20 µs). With the feedback frame: {frame + fb}.")
+    out.append("")
+    out.append(HISTORY)
     out.append("")
     out.append("### Where the instructions go\n")
     out.append("Instructions per call by function, averaged over the sampled calls (code inlined into a")
@@ -107,12 +114,13 @@ def main(size_path, counts_path):
     out.append("control handlers skip a few register reads the board build does; the handler counts include")
     out.append("RTIC's lock code and the exception return. `watchdog_tick` and `spi_dma_done` handlers are")
     out.append("estimated from their pure parts plus a margin because the emulator build adds semihosting")
-    out.append("I/O to them. Stack figures are the deepest SP seen below the entry SP during the sampled calls")
-    out.append("(measured, not a call-graph bound; the hardware exception frame of 32 bytes, 104 with FPU")
-    out.append("context, comes on top per preemption level). Worst case nested: the four levels together")
-    out.append("stay within the sum of the per-unit figures plus 4 × 104 bytes.")
+    out.append("I/O to them. The \"own stack\" figures above are the deepest SP seen below the entry SP during")
+    out.append("the sampled calls (measured, not a bound); the bound per task follows.")
+    if stack_path:
+        out.append("")
+        out.append(open(stack_path).read().rstrip())
     print("\n".join(out))
 
 
 if __name__ == "__main__":
-    main(sys.argv[1], sys.argv[2])
+    main(*sys.argv[1:4])

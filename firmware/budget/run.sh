@@ -1,7 +1,8 @@
 #!/usr/bin/env bash
 # Regenerates firmware/BUDGET.md: flash/RAM of the board build, executed instructions per frame and
-# per control-loop iteration (Cortex-M4 code under QEMU, counted by gdb single-stepping), stack use
-# per unit, and the resulting CPU load at 168 MHz. A report, not a test: it takes a few minutes.
+# per control-loop iteration (Cortex-M4 code under QEMU, counted by gdb single-stepping), measured
+# stack use per unit, the worst-case stack per task from the call graph (stack.sh), and the resulting
+# CPU load at 168 MHz. A report, not a test: it takes several minutes.
 # Needs qemu-system-arm, gdb-multiarch, binutils-arm-none-eabi, iproute2 (Debian packages) and python3.
 set -euo pipefail
 cd "$(dirname "$0")/../.."
@@ -37,5 +38,6 @@ if [ ! -s "$work/counts.json" ]; then
   exit 1
 fi
 arm-none-eabi-size -A "$board" > "$work/size.txt"
-python3 firmware/budget/report.py "$work/size.txt" "$work/counts.json" > firmware/BUDGET.md
+bash firmware/budget/stack.sh > "$work/stack.md"
+python3 firmware/budget/report.py "$work/size.txt" "$work/counts.json" "$work/stack.md" > firmware/BUDGET.md
 echo "wrote firmware/BUDGET.md"

@@ -63,14 +63,17 @@ def stack_sizes(elf):
 
 
 def functions(elf):
-    """address → (mangled name, size) of every function symbol."""
-    fns = {}
+    """address → (mangled name, size) of every function symbol, and name → address of every alias."""
+    fns, names = {}, {}
     for line in run("arm-none-eabi-nm", "-S", "--defined-only", elf).splitlines():
         parts = line.split()
         if len(parts) == 4 and parts[2] in "Tt":
             addr = int(parts[0], 16) & ~1
             fns.setdefault(addr, (parts[3], int(parts[1], 16)))
-    return fns
+            names.setdefault(parts[3], addr)
+        elif len(parts) == 3 and parts[1] in "Tt":  # an alias without a size (HardFault)
+            names.setdefault(parts[2], int(parts[0], 16) & ~1)
+    return fns, names
 
 
 HEADER = re.compile(r"^([0-9a-f]+) <(.+)>:$")
@@ -124,12 +127,9 @@ def prologue_bytes(insns):
 
 def main(elf):
     sizes = stack_sizes(elf)
-    fns = functions(elf)
+    fns, by_name = functions(elf)
     code = disassemble(elf)
     starts = sorted(fns)
-    by_name = {}
-    for addr, (name, _) in fns.items():
-        by_name.setdefault(name, addr)
 
     def owner(target):
         """The function whose code holds `target` (None outside every function)."""
@@ -145,7 +145,7 @@ def main(elf):
         a = starts[lo - 1]
         return a if target < a + max(fns[a][1], 2) else None
 
-    frame, source, callees, indirect = {}, {}, {}, {}
+    frame, source, callees, indirect, resolved = {}, {}, {}, {}, {}
     for addr, insns in code.items():
         if addr not in fns:
             continue
@@ -153,9 +153,18 @@ def main(elf):
             frame[addr], source[addr] = sizes[addr], "compiler"
         else:
             frame[addr], source[addr] = prologue_bytes(insns), "prologue"
-        out, ind = set(), False
+        out, ind, taken, movw = set(), False, set(), {}
         for mnem, ops in insns:
             base = mnem.split(".")[0]
+            # Function addresses built in a register (movw/movt, Thumb bit set): the targets of
+            # this function's indirect calls when it picks one of a few functions (defmt-rtt does).
+            m = re.match(r"(r\d+|ip|lr|sl|fp), #(\d+)", ops)
+            if m and base == "movw":
+                movw[m.group(1)] = int(m.group(2))
+            elif m and base == "movt" and m.group(1) in movw:
+                value = (int(m.group(2)) << 16) | movw[m.group(1)]
+                if value & 1 and (value & ~1) in fns:
+                    taken.add(value & ~1)
             if base in ("bl", "b", "blx") or re.fullmatch(r"b(eq|ne|cs|cc|hs|lo|mi|pl|vs|vc|hi|ls|ge|lt|gt|le)", base):
                 m = re.match(r"([0-9a-f]+)\b", ops)
                 if m:
@@ -168,6 +177,9 @@ def main(elf):
                 ind = True
             elif base in ("mov", "ldr") and ops.startswith("pc,"):
                 ind = True
+        if ind and taken:
+            out |= taken
+            resolved[addr] = taken
         callees[addr], indirect[addr] = out, ind
 
     demangled = {}
@@ -177,7 +189,21 @@ def main(elf):
 
     def pretty(addr):
         d = demangled.get(fns[addr][0], fns[addr][0])
-        return re.sub(r"::h[0-9a-f]{16}$", "", d)
+        d = re.sub(r"::h[0-9a-f]{16}$", "", d)
+        d = re.sub(r"\[[0-9a-f]{16}\]", "", d)
+        # `<Type>::method` (an inherent method) → `Type::method`.
+        return re.sub(r"^<([^<> ]*)>::", r"\1::", d)
+
+    def brief(addr):
+        """The last two path segments of the name, without generic arguments."""
+        depth, flat = 0, []
+        for ch in pretty(addr):
+            depth += ch == "<"
+            if depth == 0:
+                flat.append(ch)
+            depth -= ch == ">" and depth > 0
+        parts = [p for p in "".join(flat).split("::") if p]
+        return "::".join(parts[-2:])
 
     memo, cycles = {}, set()
 
@@ -195,7 +221,7 @@ def main(elf):
             if b > best:
                 best, chain = b, ch
         if indirect.get(addr):
-            ind.add(pretty(addr))
+            ind.add(addr)
         res = (frame.get(addr, 0) + best, [addr] + chain, ind)
         memo[addr] = res
         return res
@@ -218,8 +244,7 @@ def main(elf):
         rows_ind |= ind
         per_level[prio] = max(per_level.get(prio, 0), total)
         chain_s = " → ".join(
-            f"`{pretty(a).split('::')[-1] if len(pretty(a)) > 40 else pretty(a)}` {frame[a]}"
-            + ("*" if source[a] == "prologue" else "") for a in chain)
+            f"`{brief(a)}` {frame[a]}" + ("*" if source[a] == "prologue" else "") for a in chain)
         out.append(f"| {task} (`{sym}`) | {prio} | **{total}** | {chain_s} | {len(ind) or 'none'} |")
     out.append("")
     out.append("\\* frame read from the prologue (no `.stack_sizes` entry).")
@@ -236,10 +261,52 @@ def main(elf):
         out.append("Recursion: none in the call graph.")
     if rows_ind:
         out.append("")
-        out.append("Functions with indirect calls reached from a task (their targets are not followed: "
-                   "bounded by hand below):")
-        for f in sorted(rows_ind):
-            out.append(f"- `{f}`")
+        out.append("Functions with indirect calls (`blx rN`) reached from a root:")
+        for a in sorted(rows_ind, key=pretty):
+            if a in resolved:
+                targets = ", ".join(f"`{brief(t)}`" for t in sorted(resolved[a], key=pretty))
+                out.append(f"- `{pretty(a)}`: targets taken as the function addresses it builds "
+                           f"(movw/movt): {targets} (included above)")
+            else:
+                out.append(f"- `{pretty(a)}`: targets not followed, bounded by hand")
+    def reach(root):
+        seen, todo = set(), [root]
+        while todo:
+            a = todo.pop()
+            if a not in seen:
+                seen.add(a)
+                todo.extend(callees.get(a, ()))
+        return seen
+
+    panics = {a for a in fns if pretty(a).startswith("core::panicking::")}
+    cycle_addrs = {a for a in fns if pretty(a) in cycles}
+    out.append("")
+    out.append("| root | reaches a panic | reaches a cycle | reaches an unresolved indirect call |")
+    out.append("|---|---|---|---|")
+    clean_tasks = True
+    for sym, task, prio in ROOTS:
+        if sym not in by_name:
+            continue
+        r = reach(by_name[sym])
+        flags = [bool(r & panics), bool(r & cycle_addrs),
+                 any(indirect.get(a) and a not in resolved for a in r)]
+        if prio in (2, 3, 4) and any(flags):
+            clean_tasks = False
+        out.append(f"| `{sym}` | " + " | ".join("yes" if f else "no" for f in flags) + " |")
+    out.append("")
+    out.append("Bounded by hand (not computed): a cycle is cut where it closes, so each recursion listed")
+    out.append("above adds the frames of one more pass, and the targets of unresolved indirect calls are not")
+    out.append("included. In this build the only cycle is the panic handler re-entered by a panic inside its")
+    out.append("own defmt write (panic-probe's guard stops the second pass before it prints: one more")
+    out.append("`panic_fmt` + `rust_begin_unwind` frame), and the unresolved indirect calls are `core::fmt`")
+    out.append("trait-object calls on the same panic path." if cycles <= {"core::panicking::panic_fmt"}
+               else "CHECK: a cycle other than the panic handler's appeared; bound it by hand.")
+    if clean_tasks:
+        out.append("Both are reached only from `main` (thread mode: its figure leaves those frames out);")
+        out.append("the four tasks reach no panic, no cycle and no unresolved")
+        out.append("indirect call (table above), so their figures are complete bounds.")
+    else:
+        out.append("A TASK REACHES ONE OF THEM (table above): its figure is not a complete bound.")
     if missing:
         out.append("")
         out.append("Roots not found in the ELF: " + ", ".join(missing))

@@ -143,6 +143,28 @@ impl<'a> Writer<'a> {
     }
 }
 
+/// [`Reader::varint`] for two bytes or more (or none left): the value and the bytes after it. Takes
+/// and returns the slice by value, so the caller's reader can stay in registers.
+#[inline(never)]
+fn varint_long(bytes: &[u8]) -> Result<(u64, &[u8]), DecodeError> {
+    let mut rest = bytes;
+    let mut value: u64 = 0;
+    for i in 0..10u32 {
+        let (&b, tail) = rest.split_first().ok_or(DecodeError)?;
+        rest = tail;
+        let bits = u64::from(b & 0x7F);
+        // The tenth byte carries bit 63 only.
+        if i == 9 && bits > 1 {
+            return Err(DecodeError);
+        }
+        value |= bits.wrapping_shl(i.wrapping_mul(7));
+        if b & 0x80 == 0 {
+            return Ok((value, rest));
+        }
+    }
+    Err(DecodeError)
+}
+
 /// A field value as read from the wire.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub(crate) enum Value {
@@ -187,28 +209,12 @@ impl<'a> Reader<'a> {
                 self.rest = tail;
                 Ok(u64::from(b))
             }
-            _ => self.varint_long(),
-        }
-    }
-
-    /// [`Self::varint`] for two bytes or more (or none left).
-    #[inline(never)]
-    fn varint_long(&mut self) -> Result<u64, DecodeError> {
-        let mut value: u64 = 0;
-        for i in 0..10u32 {
-            let (&b, tail) = self.rest.split_first().ok_or(DecodeError)?;
-            self.rest = tail;
-            let bits = u64::from(b & 0x7F);
-            // The tenth byte carries bit 63 only.
-            if i == 9 && bits > 1 {
-                return Err(DecodeError);
-            }
-            value |= bits.wrapping_shl(i.wrapping_mul(7));
-            if b & 0x80 == 0 {
-                return Ok(value);
+            _ => {
+                let (value, rest) = varint_long(self.rest)?;
+                self.rest = rest;
+                Ok(value)
             }
         }
-        Err(DecodeError)
     }
 
     /// The next field, or `None` at the end of the payload.
