@@ -3,7 +3,7 @@
 # per control-loop iteration (Cortex-M4 code under QEMU, counted by gdb single-stepping), measured
 # stack use per unit, the worst-case stack per task from the call graph (stack.sh), and the resulting
 # CPU load at 168 MHz. A report, not a test: it takes several minutes.
-# Needs qemu-system-arm, gdb-multiarch, binutils-arm-none-eabi, iproute2 (Debian packages) and python3.
+# Needs qemu-system-arm, gdb-multiarch, binutils-arm-none-eabi (Debian packages; iproute2's `ss` if present) and python3.
 set -euo pipefail
 cd "$(dirname "$0")/../.."
 cargo fw
@@ -27,6 +27,7 @@ qpid=$!
 # QEMU starts halted (-S) and listens for gdb; on a loaded machine that can take a while.
 for _ in $(seq 60); do
   # (checked without connecting: a probe connection could let the halted core run on)
+  if ! command -v ss > /dev/null; then sleep 2; break; fi
   if ss -ltn "sport = :$port" | grep -q LISTEN; then break; fi
   sleep 0.5
 done

@@ -25,7 +25,7 @@ ROOTS = [
     ("DMA1_STREAM3", "spi_dma_done", 2),
     ("TIM5", "speed_pid", 3),
     ("ADC", "current_loop", 4),
-    ("HardFault", "HardFault (ends in a breakpoint/reset)", 5),
+    ("HardFault", "HardFault handler", -1),
 ]
 # Hardware exception frame per preemption: 8 words, 26 with the FPU context (lazy stacking reserves
 # it when the interrupted code used the FPU), plus 4 bytes of alignment padding.
@@ -227,9 +227,11 @@ def main(elf):
         return res
 
     out = ["## Worst-case stack per task\n"]
-    out.append("Computed by `firmware/budget/stack.sh` from the board build: per-function frame sizes from")
-    out.append("`-Z emit-stack-sizes` (or, marked *prologue*, read from the function's prologue), call graph from")
-    out.append("the disassembly (direct calls and tail calls; a tail call counted as nested, an over-estimate).\n")
+    out.append("Computed by `firmware/budget/stack.sh` from the board build (the pinned compiler, `cargo fw`'s")
+    out.append("profile, plus `-Z emit-stack-sizes` allowed by `RUSTC_BOOTSTRAP=1`): per-function frame sizes")
+    out.append("from the `.stack_sizes` section (or, marked *prologue*, read from the function's prologue), call")
+    out.append("graph from the disassembly (direct calls and tail calls; a tail call counted as nested, an")
+    out.append("over-estimate).\n")
     out.append("| task | priority | worst-case bytes | deepest chain (bytes per frame) | indirect calls met |")
     out.append("|---|---|---|---|---|")
     per_level = {}

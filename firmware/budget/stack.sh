@@ -5,7 +5,8 @@
 #
 # The flag is unstable. RUSTC_BOOTSTRAP=1 lets the pinned stable compiler accept it, so the analysed
 # code is what that compiler generates for `cargo fw` (same version, same profile; the flag only adds
-# the section). A separate target dir keeps the board build untouched.
+# the section). A separate target dir keeps the board build untouched. (A nightly toolchain would
+# need its own thumbv7em rust-std or `-Z build-std`, and would analyse another compiler's code.)
 # Needs binutils-arm-none-eabi (objdump, nm, objcopy, c++filt) and python3.
 set -euo pipefail
 cd "$(dirname "$0")/../.."
