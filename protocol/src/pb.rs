@@ -143,6 +143,28 @@ impl<'a> Writer<'a> {
     }
 }
 
+/// [`Reader::varint`] for two bytes or more (or none left): the value and the bytes after it. Takes
+/// and returns the slice by value, so the caller's reader can stay in registers.
+#[inline(never)]
+fn varint_long(bytes: &[u8]) -> Result<(u64, &[u8]), DecodeError> {
+    let mut rest = bytes;
+    let mut value: u64 = 0;
+    for i in 0..10u32 {
+        let (&b, tail) = rest.split_first().ok_or(DecodeError)?;
+        rest = tail;
+        let bits = u64::from(b & 0x7F);
+        // The tenth byte carries bit 63 only.
+        if i == 9 && bits > 1 {
+            return Err(DecodeError);
+        }
+        value |= bits.wrapping_shl(i.wrapping_mul(7));
+        if b & 0x80 == 0 {
+            return Ok((value, rest));
+        }
+    }
+    Err(DecodeError)
+}
+
 /// A field value as read from the wire.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub(crate) enum Value {
@@ -177,22 +199,22 @@ impl<'a> Reader<'a> {
     }
 
     /// A varint of at most 10 bytes whose value fits 64 bits.
+    ///
+    /// Every key and every small value (mode, enable, version) of these messages is one byte:
+    /// that case is inlined into the caller, longer varints take the out-of-line loop.
+    #[inline(always)]
     fn varint(&mut self) -> Result<u64, DecodeError> {
-        let mut value: u64 = 0;
-        for i in 0..10u32 {
-            let (&b, tail) = self.rest.split_first().ok_or(DecodeError)?;
-            self.rest = tail;
-            let bits = u64::from(b & 0x7F);
-            // The tenth byte carries bit 63 only.
-            if i == 9 && bits > 1 {
-                return Err(DecodeError);
+        match self.rest.split_first() {
+            Some((&b, tail)) if b & 0x80 == 0 => {
+                self.rest = tail;
+                Ok(u64::from(b))
             }
-            value |= bits.wrapping_shl(i.wrapping_mul(7));
-            if b & 0x80 == 0 {
-                return Ok(value);
+            _ => {
+                let (value, rest) = varint_long(self.rest)?;
+                self.rest = rest;
+                Ok(value)
             }
         }
-        Err(DecodeError)
     }
 
     /// The next field, or `None` at the end of the payload.
@@ -220,9 +242,8 @@ impl<'a> Reader<'a> {
                 Value::Len
             }
             WT_I32 => {
-                let b = self.take(4)?;
-                let mut w = [0u8; 4];
-                w.copy_from_slice(b);
+                let (&w, tail) = self.rest.split_first_chunk::<4>().ok_or(DecodeError)?;
+                self.rest = tail;
                 Value::I32(u32::from_le_bytes(w))
             }
             _ => return Err(DecodeError),

@@ -273,3 +273,56 @@ fn a_repeated_frame_is_stale_for_the_ladder() {
     f[10] ^= 1;
     assert_eq!(command_event(&f), Event::Rejected(RejectReason::Crc));
 }
+
+/// `open` as the module docs state it, the straightforward way: CRC over the whole body, then the
+/// length, then the padding. The fast path in `open` must give the same answer for every frame.
+fn open_reference(frame: &[u8; FRAME_LEN]) -> Result<&[u8], RejectReason> {
+    let stored = u16::from_le_bytes([frame[62], frame[63]]);
+    if crc16::CCITT_FALSE.checksum(&frame[..62]) != stored {
+        return Err(RejectReason::Crc);
+    }
+    let len = usize::from(frame[0]);
+    if len > MAX_PAYLOAD || frame[1 + len..62].iter().any(|&b| b != 0) {
+        return Err(RejectReason::Framing);
+    }
+    Ok(&frame[1..1 + len])
+}
+
+#[test]
+fn open_agrees_with_the_straightforward_order_of_checks() {
+    let mut x: u32 = 0x1234_5678;
+    let mut next = move || {
+        x ^= x << 13;
+        x ^= x >> 17;
+        x ^= x << 5;
+        x
+    };
+    let mut seen = [0usize; 3]; // Ok, Crc, Framing
+    for _ in 0..20_000 {
+        let len = (next() % 70) as usize; // 62..69 are out of range
+        let mut f = [0u8; FRAME_LEN];
+        f[0] = len as u8;
+        for b in f[1..(1 + len).min(62)].iter_mut() {
+            *b = next() as u8;
+        }
+        // Sometimes a stray byte in the padding (or anywhere).
+        if next() % 4 == 0 {
+            f[(next() % 62) as usize] ^= 1 << (next() % 8);
+        }
+        let crc = crc16::checksum(&f[..62]);
+        f[62..].copy_from_slice(&crc.to_le_bytes());
+        // Sometimes a broken CRC, after the fact.
+        if next() % 4 == 0 {
+            f[(next() % 64) as usize] ^= 1 << (next() % 8);
+        }
+        let got = open(&f);
+        assert_eq!(got, open_reference(&f), "{f:02x?}");
+        seen[match got {
+            Ok(_) => 0,
+            Err(RejectReason::Crc) => 1,
+            Err(_) => 2,
+        }] += 1;
+    }
+    // Every outcome was exercised many times.
+    assert!(seen.iter().all(|&n| n > 1000), "{seen:?}");
+}

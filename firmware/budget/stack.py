@@ -1,0 +1,324 @@
+#!/usr/bin/env python3
+"""Worst-case stack per task of the firmware ELF, from the compiler's frame sizes and the call graph.
+
+Usage: stack.py ELF > stack.md   (ELF built with `-Z emit-stack-sizes`; see stack.sh)
+
+- Frame sizes: the `.stack_sizes` section (LLVM writes, per function, its address and the bytes its
+  prologue reserves). Functions without an entry (assembly, and `compiler_builtins`, which is not
+  compiled with the flag) get their size from their prologue in the disassembly (`push`, `stmdb sp!`,
+  `vpush`, `sub sp`), marked "prologue".
+- Call graph: direct calls (`bl`) and branches into another function (tail calls) in the
+  `arm-none-eabi-objdump -d` listing. A tail call is counted as a nested call (an over-estimate).
+- Indirect calls (`blx rN`, `bx rN` other than `bx lr`) cannot be followed: they are listed per root
+  and must be bounded by hand. Recursion is reported (a cycle has no bound).
+"""
+import re
+import subprocess
+import sys
+import tempfile
+import os
+
+ROOTS = [
+    # (vector / symbol, task, priority); thread mode first.
+    ("main", "init + idle (thread mode)", 0),
+    ("TIM2", "watchdog_tick", 2),
+    ("DMA1_STREAM3", "spi_dma_done", 2),
+    ("TIM5", "speed_pid", 3),
+    ("ADC", "current_loop", 4),
+    ("HardFault", "HardFault handler", -1),
+]
+# Hardware exception frame per preemption: 8 words, 26 with the FPU context (lazy stacking reserves
+# it when the interrupted code used the FPU), plus 4 bytes of alignment padding.
+EXC_FRAME = 26 * 4 + 4
+
+
+def run(*args):
+    return subprocess.run(args, check=True, capture_output=True, text=True).stdout
+
+
+def uleb(data, i):
+    value = shift = 0
+    while True:
+        b = data[i]
+        i += 1
+        value |= (b & 0x7F) << shift
+        shift += 7
+        if b & 0x80 == 0:
+            return value, i
+
+
+def stack_sizes(elf):
+    with tempfile.TemporaryDirectory() as d:
+        out = os.path.join(d, "ss.bin")
+        run("arm-none-eabi-objcopy", "-O", "binary", "--only-section=.stack_sizes",
+            "--set-section-flags", ".stack_sizes=alloc", elf, out)
+        data = open(out, "rb").read()
+    sizes = {}
+    i = 0
+    while i + 4 <= len(data):
+        addr = int.from_bytes(data[i:i + 4], "little") & ~1
+        size, i = uleb(data, i + 4)
+        sizes[addr] = size
+    return sizes
+
+
+def functions(elf):
+    """address → (mangled name, size) of every function symbol, and name → address of every alias."""
+    fns, names = {}, {}
+    for line in run("arm-none-eabi-nm", "-S", "--defined-only", elf).splitlines():
+        parts = line.split()
+        if len(parts) == 4 and parts[2] in "Tt":
+            addr = int(parts[0], 16) & ~1
+            fns.setdefault(addr, (parts[3], int(parts[1], 16)))
+            names.setdefault(parts[3], addr)
+        elif len(parts) == 3 and parts[1] in "Tt":  # an alias without a size (HardFault)
+            names.setdefault(parts[2], int(parts[0], 16) & ~1)
+    return fns, names
+
+
+HEADER = re.compile(r"^([0-9a-f]+) <(.+)>:$")
+INSN = re.compile(r"^\s*([0-9a-f]+):\s+(\S+)\s*(.*)$")
+REGLIST = re.compile(r"\{([^}]*)\}")
+
+
+def reg_count(regs):
+    n = 0
+    for part in regs.split(","):
+        part = part.strip()
+        if "-" in part:
+            a, b = part.split("-")
+            n += int(b.strip()[1:]) - int(a.strip()[1:]) + 1
+        elif part:
+            n += 1
+    return n
+
+
+def disassemble(elf):
+    """address of function → list of (mnemonic, operands)."""
+    body = {}
+    cur = None
+    for line in run("arm-none-eabi-objdump", "-d", "--no-show-raw-insn", elf).splitlines():
+        m = HEADER.match(line)
+        if m:
+            cur = int(m.group(1), 16)
+            body[cur] = []
+            continue
+        m = INSN.match(line)
+        if m and cur is not None:
+            body[cur].append((m.group(2), m.group(3).split(";")[0].split("@")[0].strip()))
+    return body
+
+
+def prologue_bytes(insns):
+    """Stack a function reserves, read from its first instructions (for functions without an entry)."""
+    total = 0
+    for mnem, ops in insns[:8]:
+        if mnem.startswith("push") or (mnem.startswith("stmdb") and ops.startswith("sp!")):
+            total += 4 * reg_count(REGLIST.search(ops).group(1))
+        elif mnem.startswith("vpush"):
+            regs = REGLIST.search(ops).group(1)
+            total += (8 if "d" in regs else 4) * reg_count(regs.replace("d", "r").replace("s", "r"))
+        elif mnem.startswith("sub") and ops.startswith("sp, "):
+            m = re.search(r"#(\d+)", ops)
+            if m:
+                total += int(m.group(1))
+    return total
+
+
+def main(elf):
+    sizes = stack_sizes(elf)
+    fns, by_name = functions(elf)
+    code = disassemble(elf)
+    starts = sorted(fns)
+
+    def owner(target):
+        """The function whose code holds `target` (None outside every function)."""
+        lo, hi = 0, len(starts)
+        while lo < hi:
+            mid = (lo + hi) // 2
+            if starts[mid] <= target:
+                lo = mid + 1
+            else:
+                hi = mid
+        if lo == 0:
+            return None
+        a = starts[lo - 1]
+        return a if target < a + max(fns[a][1], 2) else None
+
+    frame, source, callees, indirect, resolved = {}, {}, {}, {}, {}
+    for addr, insns in code.items():
+        if addr not in fns:
+            continue
+        if addr in sizes:
+            frame[addr], source[addr] = sizes[addr], "compiler"
+        else:
+            frame[addr], source[addr] = prologue_bytes(insns), "prologue"
+        out, ind, taken, movw = set(), False, set(), {}
+        for mnem, ops in insns:
+            base = mnem.split(".")[0]
+            # Function addresses built in a register (movw/movt, Thumb bit set): the targets of
+            # this function's indirect calls when it picks one of a few functions (defmt-rtt does).
+            m = re.match(r"(r\d+|ip|lr|sl|fp), #(\d+)", ops)
+            if m and base == "movw":
+                movw[m.group(1)] = int(m.group(2))
+            elif m and base == "movt" and m.group(1) in movw:
+                value = (int(m.group(2)) << 16) | movw[m.group(1)]
+                if value & 1 and (value & ~1) in fns:
+                    taken.add(value & ~1)
+            if base in ("bl", "b", "blx") or re.fullmatch(r"b(eq|ne|cs|cc|hs|lo|mi|pl|vs|vc|hi|ls|ge|lt|gt|le)", base):
+                m = re.match(r"([0-9a-f]+)\b", ops)
+                if m:
+                    t = owner(int(m.group(1), 16))
+                    if t is not None and t != addr:
+                        out.add(t)
+                elif base == "blx":
+                    ind = True
+            elif base == "bx" and ops != "lr":
+                ind = True
+            elif base in ("mov", "ldr") and ops.startswith("pc,"):
+                ind = True
+        if ind and taken:
+            out |= taken
+            resolved[addr] = taken
+        callees[addr], indirect[addr] = out, ind
+
+    demangled = {}
+    names = [fns[a][0] for a in fns]
+    for a, d in zip(names, run("arm-none-eabi-c++filt", *names).splitlines() if names else []):
+        demangled[a] = d
+
+    def pretty(addr):
+        d = demangled.get(fns[addr][0], fns[addr][0])
+        d = re.sub(r"::h[0-9a-f]{16}$", "", d)
+        d = re.sub(r"\[[0-9a-f]{16}\]", "", d)
+        # `<Type>::method` (an inherent method) → `Type::method`.
+        return re.sub(r"^<([^<> ]*)>::", r"\1::", d)
+
+    def brief(addr):
+        """The last two path segments of the name, without generic arguments."""
+        depth, flat = 0, []
+        for ch in pretty(addr):
+            depth += ch == "<"
+            if depth == 0:
+                flat.append(ch)
+            depth -= ch == ">" and depth > 0
+        parts = [p for p in "".join(flat).split("::") if p]
+        return "::".join(parts[-2:])
+
+    memo, cycles = {}, set()
+
+    def worst(addr, path=()):
+        """(bytes, deepest call chain, indirect-call sites met) from `addr` down."""
+        if addr in path:
+            cycles.add(pretty(addr))
+            return 0, [], set()
+        if addr in memo:
+            return memo[addr]
+        best, chain, ind = 0, [], set()
+        for c in callees.get(addr, ()):
+            b, ch, i = worst(c, path + (addr,))
+            ind |= i
+            if b > best:
+                best, chain = b, ch
+        if indirect.get(addr):
+            ind.add(addr)
+        res = (frame.get(addr, 0) + best, [addr] + chain, ind)
+        memo[addr] = res
+        return res
+
+    out = ["## Worst-case stack per task\n"]
+    out.append("Computed by `firmware/budget/stack.sh` from the board build (the pinned compiler, `cargo fw`'s")
+    out.append("profile, plus `-Z emit-stack-sizes` allowed by `RUSTC_BOOTSTRAP=1`): per-function frame sizes")
+    out.append("from the `.stack_sizes` section (or, marked *prologue*, read from the function's prologue), call")
+    out.append("graph from the disassembly (direct calls and tail calls; a tail call counted as nested, an")
+    out.append("over-estimate).\n")
+    out.append("| task | priority | worst-case bytes | deepest chain (bytes per frame) | indirect calls met |")
+    out.append("|---|---|---|---|---|")
+    per_level = {}
+    rows_ind = set()
+    missing = []
+    for sym, task, prio in ROOTS:
+        addr = by_name.get(sym)
+        if addr is None:
+            missing.append(sym)
+            continue
+        total, chain, ind = worst(addr)
+        rows_ind |= ind
+        per_level[prio] = max(per_level.get(prio, 0), total)
+        chain_s = " → ".join(
+            f"`{brief(a)}` {frame[a]}" + ("*" if source[a] == "prologue" else "") for a in chain)
+        out.append(f"| {task} (`{sym}`) | {prio} | **{total}** | {chain_s} | {len(ind) or 'none'} |")
+    out.append("")
+    out.append("\\* frame read from the prologue (no `.stack_sizes` entry).")
+    levels = sorted(per_level)
+    nested = sum(per_level[p] for p in levels) + EXC_FRAME * (len(levels) - 1)
+    out.append("")
+    out.append(f"All priority levels nested (thread mode + the worst task of each of the {len(levels) - 1} "
+               f"exception levels, each preemption adding a {EXC_FRAME}-byte exception frame with FPU "
+               f"context and alignment): **{nested} bytes**. Priority-2 tasks do not preempt each other.")
+    out.append("")
+    if cycles:
+        out.append("Recursion found (no bound computed through it): " + ", ".join(f"`{c}`" for c in sorted(cycles)))
+    else:
+        out.append("Recursion: none in the call graph.")
+    if rows_ind:
+        out.append("")
+        out.append("Functions with indirect calls (`blx rN`) reached from a root:")
+        for a in sorted(rows_ind, key=pretty):
+            if a in resolved:
+                targets = ", ".join(f"`{brief(t)}`" for t in sorted(resolved[a], key=pretty))
+                out.append(f"- `{pretty(a)}`: targets taken as the function addresses it builds "
+                           f"(movw/movt): {targets} (included above)")
+            else:
+                out.append(f"- `{pretty(a)}`: targets not followed, bounded by hand")
+    def reach(root):
+        seen, todo = set(), [root]
+        while todo:
+            a = todo.pop()
+            if a not in seen:
+                seen.add(a)
+                todo.extend(callees.get(a, ()))
+        return seen
+
+    panics = {a for a in fns if pretty(a).startswith("core::panicking::")}
+    cycle_addrs = {a for a in fns if pretty(a) in cycles}
+    out.append("")
+    out.append("| root | reaches a panic | reaches a cycle | reaches an unresolved indirect call |")
+    out.append("|---|---|---|---|")
+    clean_tasks = True
+    for sym, task, prio in ROOTS:
+        if sym not in by_name:
+            continue
+        r = reach(by_name[sym])
+        flags = [bool(r & panics), bool(r & cycle_addrs),
+                 any(indirect.get(a) and a not in resolved for a in r)]
+        if prio in (2, 3, 4) and any(flags):
+            clean_tasks = False
+        out.append(f"| `{sym}` | " + " | ".join("yes" if f else "no" for f in flags) + " |")
+    out.append("")
+    out.append("Bounded by hand (not computed): a cycle is cut where it closes, so each recursion listed")
+    out.append("above adds the frames of one more pass, and the targets of unresolved indirect calls are not")
+    out.append("included. In this build the only cycle is the panic handler re-entered by a panic inside its")
+    out.append("own defmt write (panic-probe's guard stops the second pass before it prints: one more")
+    out.append("`panic_fmt` + `rust_begin_unwind` frame), and the unresolved indirect calls are `core::fmt`")
+    out.append("trait-object calls on the same panic path." if cycles <= {"core::panicking::panic_fmt"}
+               else "CHECK: a cycle other than the panic handler's appeared; bound it by hand.")
+    if clean_tasks:
+        out.append("Both are reached only from `main` (thread mode: its figure leaves those frames out);")
+        out.append("the four tasks reach no panic, no cycle and no unresolved")
+        out.append("indirect call (table above), so their figures are complete bounds.")
+    else:
+        out.append("A TASK REACHES ONE OF THEM (table above): its figure is not a complete bound.")
+    if missing:
+        out.append("")
+        out.append("Roots not found in the ELF: " + ", ".join(missing))
+    no_entry = sorted(pretty(a) for a in frame if source[a] == "prologue" and any(
+        a in memo.get(by_name.get(s, -1), (0, [], set()))[1] for s, _, _ in ROOTS))
+    if no_entry:
+        out.append("")
+        out.append("On a deepest chain without a `.stack_sizes` entry: " + ", ".join(f"`{n}`" for n in no_entry))
+    print("\n".join(out))
+
+
+if __name__ == "__main__":
+    main(sys.argv[1])
