@@ -41,8 +41,11 @@ HISTORY = [
     "Per-frame history (max over the same sampled frames): 1,896 (crc crate `Table<1>`, generic",
     "varint loop, bytewise padding check) → 1,339 (crc `Table<16>`, padding a word at a time) →",
     "1,153 (one-byte varints inlined) → 1,073 (own slice-by-16 tables, remainder in 8/4/2-byte",
-    "blocks) → 1,020 (long varints out of line, reader kept in registers) → the figure above (zero",
-    "padding entered into the CRC by an exact zero-extension step instead of being read).",
+    "blocks) → the figure above (long varints out of line, reader kept in registers). Measured and",
+    "set aside: entering a well-framed frame's zero padding into the CRC by an exact zero-extension",
+    "step instead of reading it gave 957, but makes the CRC length data-dependent; the protocol's",
+    "Kani bit-flip harness had not finished after 18 minutes with it (its time without it was not",
+    "measured), so it stays out until that is checked.",
 ]
 
 
@@ -81,7 +84,7 @@ def main(size_path, counts_path, stack_path=None):
     out.append("The sampled frames are the emulator test's commands: the first has enable 0 and zero speeds")
     out.append("(fields omitted), the others carry all seven fields (26-byte payload, the longest a conforming")
     out.append("sender writes for an accepted command). A frame padded with unknown or repeated fields up to")
-    out.append("the 61-byte limit costs more (every field decoded, no padding to skip); that case is not measured.")
+    out.append("the 61-byte limit costs more (every field decoded); that case is not measured.")
     out.append("")
     out.append("### Where the instructions go\n")
     out.append("Instructions per call by function, averaged over the sampled calls (code inlined into a")

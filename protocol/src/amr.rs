@@ -31,9 +31,7 @@
 //!   length can never make it read the wrong bytes as a CRC);
 //! - every one of the 512 bits is protected, so every single-bit error, and every burst of up to
 //!   16 bits, is detected (CRC-16 guarantees; the harnesses and `examples/residual_error.rs` check it);
-//! - the receiver's work is bounded by the longest message, not by the frame: for a well-framed
-//!   frame the zero padding enters the CRC as a two-lookup "extend by n zero bytes" step (exact; see
-//!   `open`), and only a badly framed frame costs a CRC over all 62 bytes (it decodes nothing after);
+//! - the work is the same for every frame (62 bytes), which keeps the receive path's time constant;
 //! - a bus stuck at 0x00 or 0xFF fails the CRC (0x00… would need CRC 0x0000, 0xFF… would need 0xFFFF).
 //!
 //! The length is one byte before the payload because protobuf has no terminator: the padding
@@ -266,33 +264,21 @@ fn seal(out: &mut [u8; FRAME_LEN], payload_len: usize) {
 }
 
 /// Checks CRC, length and padding; returns the payload.
-///
-/// The result is that of "CRC over bytes 0..62, then length ≤ [`MAX_PAYLOAD`], then zero padding",
-/// computed the cheap way round for a well-framed frame: if the length byte is in range and the
-/// bytes after the payload are zero, the CRC of the body is the CRC of length + payload extended by
-/// that many zero bytes ([`crc16::checksum_zero_extended`], exact), so only the payload is read
-/// twice. Otherwise the whole body's CRC decides between [`RejectReason::Crc`] and
-/// [`RejectReason::Framing`], as before.
 fn open(frame: &[u8; FRAME_LEN]) -> Result<&[u8], RejectReason> {
     let (body, crc) = frame.split_at(CRC_OFFSET);
     let mut stored = [0u8; 2];
     stored.copy_from_slice(crc);
-    let stored = u16::from_le_bytes(stored);
-    let len = usize::from(*body.get(LEN_OFFSET).ok_or(RejectReason::Framing)?);
-    let end = PAYLOAD_OFFSET.saturating_add(len);
-    if let (Some(head), Some(padding)) = (body.get(..end), body.get(end..)) {
-        if all_zero(padding) {
-            if crc16::checksum_zero_extended(head, padding.len()) != stored {
-                return Err(RejectReason::Crc);
-            }
-            return head.get(PAYLOAD_OFFSET..).ok_or(RejectReason::Framing);
-        }
-    }
-    // Length out of range or non-zero padding: a framing error only if the CRC holds.
-    if crc16::checksum(body) != stored {
+    if crc16::checksum(body) != u16::from_le_bytes(stored) {
         return Err(RejectReason::Crc);
     }
-    Err(RejectReason::Framing)
+    let len = usize::from(*body.get(LEN_OFFSET).ok_or(RejectReason::Framing)?);
+    let end = PAYLOAD_OFFSET.saturating_add(len);
+    let payload = body.get(PAYLOAD_OFFSET..end).ok_or(RejectReason::Framing)?;
+    let padding = body.get(end..).ok_or(RejectReason::Framing)?;
+    if !all_zero(padding) {
+        return Err(RejectReason::Framing);
+    }
+    Ok(payload)
 }
 
 /// True if every byte of `bytes` is zero. A word at a time: the padding is most of the frame.

@@ -108,25 +108,6 @@ pub fn checksum(bytes: &[u8]) -> u16 {
     reg
 }
 
-/// CRC-16/CCITT-FALSE of `bytes` followed by `zeros` zero bytes, without reading the zeros: a zero
-/// byte only shifts the register, so `n` of them (2 ≤ n ≤ 16) are the two lookups
-/// `TABLES[n − 1][hi] ^ TABLES[n − 2][lo]`. Equal to [`checksum`] of the zero-padded message.
-pub fn checksum_zero_extended(bytes: &[u8], zeros: usize) -> u16 {
-    let mut reg = checksum(bytes);
-    let mut left = zeros;
-    while left > 0 {
-        let n = left.min(16);
-        let [hi, lo] = reg.to_be_bytes();
-        reg = match (TABLES.get(n.wrapping_sub(1)), TABLES.get(n.wrapping_sub(2))) {
-            (Some(t_hi), Some(t_lo)) => at(t_hi, hi) ^ at(t_lo, lo),
-            // n = 1: one byte-wise step with a zero byte.
-            _ => (reg << 8) ^ at(&TABLES[0], hi),
-        };
-        left = left.saturating_sub(n);
-    }
-    reg
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -191,25 +172,6 @@ mod tests {
             for end in start..buf.len() {
                 let part = &buf[start..end];
                 assert_eq!(checksum(part), CCITT_FALSE.checksum(part), "{start}..{end}");
-            }
-        }
-    }
-
-    #[test]
-    fn zero_extension_equals_the_padded_message() {
-        let mut buf = [0u8; 120];
-        for (i, b) in buf.iter_mut().enumerate().take(40) {
-            *b = (i as u8).wrapping_mul(37).wrapping_add(11);
-        }
-        for head in 0..40 {
-            let mut padded = [0u8; 120];
-            padded[..head].copy_from_slice(&buf[..head]);
-            for zeros in 0..80 {
-                assert_eq!(
-                    checksum_zero_extended(&buf[..head], zeros),
-                    seed_bitwise(&padded[..head + zeros]),
-                    "head {head} zeros {zeros}"
-                );
             }
         }
     }
