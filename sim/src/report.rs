@@ -217,20 +217,27 @@ pub fn plot(path: &Path, title: &str, r: &RunResult) -> Result<(), String> {
     // Watchdog age.
     let age: Vec<u8> = s.age.iter().map(|&m| m.min(255) as u8).collect();
     let top = f64::from(age.iter().copied().max().unwrap_or(0).max(12)) + 1.0;
+    let th = statemachine::ConfigParams::DEFAULT;
+    let caption = format!(
+        "watchdog age (ticks since last valid frame; HOLD ≥ {}, STOP ≥ {}, BRAKE ≥ {})",
+        th.hold_after, th.stop_after, th.brake_after
+    );
     let mut c = ChartBuilder::on(&panels[2])
         .margin(8)
         .x_label_area_size(30)
         .y_label_area_size(60)
-        .caption(
-            "watchdog age (ticks since last valid frame; HOLD ≥ 2, STOP ≥ 5, BRAKE ≥ 10)",
-            ("sans-serif", 15),
-        )
+        .caption(caption, ("sans-serif", 15))
         .build_cartesian_2d(t0..t1, 0f64..top)
         .map_err(e)?;
     c.configure_mesh().x_desc("t (s)").draw().map_err(e)?;
     c.draw_series(LineSeries::new(bucket_max(&age), BLUE.stroke_width(1)))
         .map_err(e)?;
-    for (lvl, col) in [(2.0, RGBColor(200, 150, 0)), (10.0, RED)] {
+    for (lvl, col) in [
+        (th.hold_after, RGBColor(200, 150, 0)),
+        (th.stop_after, RGBColor(230, 90, 0)),
+        (th.brake_after, RED),
+    ] {
+        let lvl = f64::from(lvl);
         c.draw_series(LineSeries::new(
             vec![(t0, lvl), (t1, lvl)],
             col.stroke_width(1),
