@@ -7,7 +7,7 @@
 //! high sides.
 
 use crate::glue::{adc_to_amps, bridge_compare, AxisLoop, AxisParams, Liveness, SpeedEstimator};
-use crate::kinematics::{DiffDrive, Twist};
+use crate::kinematics::{DiffDrive, KinematicsError, Twist};
 use crate::pid::{AntiWindup, CurrentPi, Pid, PidGains};
 use crate::rate::RateLimiter;
 use crate::{within, Q};
@@ -110,42 +110,89 @@ pub fn rate_limiter_bounded(src: &mut impl Source) {
     cover!(src, next != target, "limited by the step");
 }
 
-/// Kinematics: construction refuses bad geometry; conversions never panic; zero maps to zero and
-/// a straight twist gives equal wheel speeds.
+/// Real geometries (wheelbase, wheel radius), m, from a small AMR to a pallet mover. The conversions
+/// are checked for each of them with fully symbolic speeds; [`geometry_checked`] covers every other
+/// geometry's construction. (With a symbolic geometry every conversion would carry 64-bit division and
+/// multiplication circuits of two unknowns, which the solver does not finish.)
+const GEOMETRIES: [(Q, Q); 4] = [
+    (Q::lit("0.3"), Q::lit("0.05")),
+    (Q::lit("0.42"), Q::lit("0.075")),
+    (Q::lit("0.6"), Q::lit("0.1")),
+    (Q::lit("1.2"), Q::lit("0.2")),
+];
+
+/// Kinematics conversions never panic or overflow for any twist and any wheel speeds; zero maps to
+/// zero, a straight twist gives equal wheel speeds, equal wheel speeds give no yaw.
 pub fn kinematics_total(src: &mut impl Source) {
-    // Geometry from a table of real robots' values plus zero (refused): a symbolic divisor makes the
-    // solver's division circuits explode, and the speeds below stay fully symbolic.
-    const BASES: [f32; 5] = [0.0, 0.3, 0.45, 0.6, 1.2];
-    const RADII: [f32; 5] = [0.0, 0.05, 0.08, 0.1, 0.2];
-    let base = Q::from_num(BASES.get(usize::from(src.below(5))).copied().unwrap_or(0.0));
-    let radius = Q::from_num(RADII.get(usize::from(src.below(5))).copied().unwrap_or(0.0));
+    for (base, radius) in GEOMETRIES {
+        let Ok(k) = DiffDrive::new(base, radius) else {
+            panic!("a real geometry was refused");
+        };
+        let t = Twist {
+            v: q(src),
+            omega: q(src),
+        };
+        let [l, r] = k.inverse(t);
+        let _ = k.forward(l, r);
+        let _ = k.forward(q(src), q(src));
+        let [zl, zr] = k.inverse(Twist {
+            v: Q::ZERO,
+            omega: Q::ZERO,
+        });
+        assert_eq!(zl, Q::ZERO);
+        assert_eq!(zr, Q::ZERO);
+        let [sl, sr] = k.inverse(Twist {
+            v: t.v,
+            omega: Q::ZERO,
+        });
+        assert_eq!(sl, sr);
+        assert_eq!(k.forward(l, l).omega, Q::ZERO);
+        cover!(src, l != r, "turning twist");
+        cover!(src, l == Q::MAX, "a wheel speed saturated");
+    }
+}
+
+/// Construction of any geometry never panics, refuses a radius outside 1 mm ..= 10 m or a wheelbase
+/// outside 1 cm ..= 100 m, and accepts every geometry inside both ranges.
+pub fn geometry_checked(src: &mut impl Source) {
+    // Any value, or (for the twin's sake: random bits rarely land in range) one near the ranges.
+    fn geometry(src: &mut impl Source) -> Q {
+        if src.bool() {
+            q(src)
+        } else {
+            src.speed_within(Q::const_from_int(120))
+        }
+    }
+    let base = geometry(src);
+    let radius = geometry(src);
+    const RADIUS: (Q, Q) = (Q::lit("0.001"), Q::const_from_int(10));
+    const BASE: (Q, Q) = (Q::lit("0.01"), Q::const_from_int(100));
+    let radius_ok = radius >= RADIUS.0 && radius <= RADIUS.1;
+    let base_ok = base >= BASE.0 && base <= BASE.1;
     let k = DiffDrive::new(base, radius);
-    cover!(src, k.is_err(), "geometry refused");
-    let Ok(k) = k else {
-        return;
-    };
-    assert!(radius > Q::ZERO && base > Q::ZERO);
-    let t = Twist {
-        v: q(src),
-        omega: q(src),
-    };
-    let [l, r] = k.inverse(t);
-    let back = k.forward(l, r);
-    let _ = back;
-    let [zl, zr] = k.inverse(Twist {
-        v: Q::ZERO,
-        omega: Q::ZERO,
-    });
-    assert_eq!(zl, Q::ZERO);
-    assert_eq!(zr, Q::ZERO);
-    let [sl, sr] = k.inverse(Twist {
-        v: t.v,
-        omega: Q::ZERO,
-    });
-    assert_eq!(sl, sr);
-    let z = k.forward(l, l);
-    assert_eq!(z.omega, Q::ZERO);
-    cover!(src, l != r, "turning twist");
+    match k {
+        Ok(k) => {
+            assert!(radius_ok && base_ok);
+            assert_eq!(k.wheelbase(), base);
+            assert_eq!(k.wheel_radius(), radius);
+        }
+        Err(KinematicsError::WheelRadius) => assert!(!radius_ok),
+        Err(KinematicsError::Wheelbase) => assert!(radius_ok && !base_ok),
+    }
+    if radius_ok && base_ok {
+        assert!(k.is_ok());
+    }
+    cover!(src, k.is_ok(), "geometry accepted");
+    cover!(
+        src,
+        k == Err(KinematicsError::WheelRadius),
+        "radius refused"
+    );
+    cover!(
+        src,
+        k == Err(KinematicsError::Wheelbase),
+        "wheelbase refused"
+    );
 }
 
 /// Bridge mapping: both compares ≤ ARR and at most one non-zero (never both high sides on).
@@ -245,9 +292,14 @@ mod proofs {
         super::rate_limiter_bounded(&mut KaniSource);
     }
     #[kani::proof]
-    #[kani::unwind(2)]
+    #[kani::unwind(5)]
     fn verify_kinematics_total() {
         super::kinematics_total(&mut KaniSource);
+    }
+    #[kani::proof]
+    #[kani::unwind(2)]
+    fn verify_geometry_checked() {
+        super::geometry_checked(&mut KaniSource);
     }
     #[kani::proof]
     #[kani::unwind(2)]
@@ -297,6 +349,10 @@ mod twins {
     #[test]
     fn kinematics_total() {
         Twin::run(0xC0_04, CASES, super::kinematics_total).assert_covered(2);
+    }
+    #[test]
+    fn geometry_checked() {
+        Twin::run(0xC0_0A, CASES, super::geometry_checked).assert_covered(3);
     }
     #[test]
     fn bridge_compare_safe() {

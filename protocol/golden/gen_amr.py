@@ -6,7 +6,7 @@
 
 The message classes come from the shipped proto/amr.proto, compiled by `protoc` into a descriptor set
 (no generated code, so any protobuf runtime version works). The frame (length byte, payload, zero
-padding, CRC-16/CCITT-FALSE little-endian over bytes 0..62) is built here independently of the Rust code.
+padding, CRC-16/CCITT-FALSE over bytes 0..62, stored big-endian) is built here independently of the Rust code.
 """
 import math
 import os
@@ -103,13 +103,13 @@ def encode(cls, kind, values):
     payload = m.SerializeToString()
     assert len(payload) <= CRC_OFFSET - 1, (kind, len(payload))
     body = bytes([len(payload)]) + payload + bytes(CRC_OFFSET - 1 - len(payload))
-    return body + struct.pack("<H", crc16_ccitt_false(body))
+    return body + struct.pack(">H", crc16_ccitt_false(body))
 
 
 def decode(cls, frame: bytes):
     if len(frame) != FRAME_LEN:
         raise ValueError("length")
-    body, crc = frame[:CRC_OFFSET], struct.unpack("<H", frame[CRC_OFFSET:])[0]
+    body, crc = frame[:CRC_OFFSET], struct.unpack(">H", frame[CRC_OFFSET:])[0]
     if crc16_ccitt_false(body) != crc:
         raise ValueError("crc")
     n = body[0]

@@ -111,8 +111,8 @@ static int encode_case(const char *line, uint8_t *frame) {
     }
     frame[0] = (uint8_t)os.bytes_written;
     uint16_t crc = crc16_ccitt(frame, CRC_OFFSET);
-    frame[CRC_OFFSET] = crc & 0xFF;
-    frame[CRC_OFFSET + 1] = crc >> 8;
+    frame[CRC_OFFSET] = crc >> 8;
+    frame[CRC_OFFSET + 1] = crc & 0xFF;
     return 1;
 }
 
@@ -129,7 +129,7 @@ static int hex_frame(const char *hex, uint8_t *frame) {
 /* Decodes a frame with nanopb and compares it with the case; returns 1 if equal. */
 static int check_case(const char *line, const uint8_t *frame) {
     uint16_t crc = crc16_ccitt(frame, CRC_OFFSET);
-    if ((frame[CRC_OFFSET] | (frame[CRC_OFFSET + 1] << 8)) != crc) {
+    if (((frame[CRC_OFFSET] << 8) | frame[CRC_OFFSET + 1]) != crc) {
         fprintf(stderr, "crc mismatch\n");
         return 0;
     }
