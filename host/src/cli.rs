@@ -441,7 +441,10 @@ fn decode_amr(kind: FrameKind, bytes: &[u8]) -> Result<String, String> {
         let detail = match reason {
             RejectReason::Crc => crc_detail(
                 protocol::crc16::checksum(frame.get(..amr::CRC_OFFSET).unwrap_or(&[])),
-                le16(&frame, amr::CRC_OFFSET),
+                u16::from_be_bytes([
+                    frame.get(amr::CRC_OFFSET).copied().unwrap_or(0),
+                    frame.get(amr::CRC_OFFSET + 1).copied().unwrap_or(0),
+                ]),
             ),
             RejectReason::Framing => format!(
                 "the LEN byte ({}) exceeds {} or the bytes after the payload are not zero",

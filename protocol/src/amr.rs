@@ -21,16 +21,22 @@
 //! ```text
 //!  offset  0      1 ............................ 1+LEN ........ 61  62       63
 //!        ┌─────┬───────────────────────────────┬────────────────┬─────────┬─────────┐
-//!        │ LEN │ message, protobuf wire format │ zero padding   │ CRC lo  │ CRC hi  │
+//!        │ LEN │ message, protobuf wire format │ zero padding   │ CRC hi  │ CRC lo  │
 //!        └─────┴───────────────────────────────┴────────────────┴─────────┴─────────┘
-//!          LEN ≤ 61        CRC-16/CCITT-FALSE over bytes 0..62, stored little-endian
+//!          LEN ≤ 61        CRC-16/CCITT-FALSE over bytes 0..62, stored big-endian
 //! ```
 //!
 //! Why the CRC sits at a fixed offset at the end and covers the whole frame, padding included:
 //! - the receiver checks integrity before it trusts any byte, the length included (a corrupted
 //!   length can never make it read the wrong bytes as a CRC);
 //! - every one of the 512 bits is protected, so every single-bit error, and every burst of up to
-//!   16 bits, is detected (CRC-16 guarantees; the harnesses and `examples/residual_error.rs` check it);
+//!   16 bits anywhere in the 64 bytes, is detected (`crc16::verification` proves it for every error
+//!   pattern; `examples/residual_error.rs` measures the rest);
+//! - the CRC is stored most significant byte first, the order its bits leave the shift register, so
+//!   the 64 bytes are one codeword of the cyclic code and the burst guarantee holds across the
+//!   boundary between body and CRC too. Stored little-endian (as seed 001 does), a burst of 13 bits
+//!   that ends in the CRC's low byte can pass the check (the exhaustive test in `crc16::verification`
+//!   finds it);
 //! - the work is the same for every frame (62 bytes), which keeps the receive path's time constant;
 //! - a bus stuck at 0x00 or 0xFF fails the CRC (0x00… would need CRC 0x0000, 0xFF… would need 0xFFFF).
 //!
@@ -50,7 +56,7 @@
 //! accepted (the host measures the command round trip and sees rejections).
 
 use crate::crc16;
-use crate::pb::{self, DecodeError, Reader, Writer};
+use crate::pb::{self, DecodeError, Reader, Value, Writer};
 use statemachine::{Command, RejectReason};
 
 /// Bytes per direction per SPI transaction.
@@ -63,7 +69,7 @@ pub const PROTOCOL_VERSION: u32 = 1;
 pub const LEN_OFFSET: usize = 0;
 /// Offset of the first payload byte.
 pub const PAYLOAD_OFFSET: usize = 1;
-/// Offset of the CRC (little-endian), the last two bytes of the frame.
+/// Offset of the CRC (big-endian: most significant byte first), the last two bytes of the frame.
 pub const CRC_OFFSET: usize = FRAME_LEN - 2;
 /// Room for the protobuf payload.
 pub const MAX_PAYLOAD: usize = CRC_OFFSET - PAYLOAD_OFFSET;
@@ -259,38 +265,53 @@ fn seal(out: &mut [u8; FRAME_LEN], payload_len: usize) {
     }
     let crc = crc16::checksum(out.get(..CRC_OFFSET).unwrap_or(&[]));
     if let Some(slot) = out.get_mut(CRC_OFFSET..) {
-        slot.copy_from_slice(&crc.to_le_bytes());
+        slot.copy_from_slice(&crc.to_be_bytes());
     }
 }
 
 /// Checks CRC, length and padding; returns the payload.
+///
+/// Every loop here has a fixed trip count (the CRC's blocks, the padding's eight words), so the time
+/// is the same for every frame and a model checker unrolls it completely.
 fn open(frame: &[u8; FRAME_LEN]) -> Result<&[u8], RejectReason> {
     let (body, crc) = frame.split_at(CRC_OFFSET);
     let mut stored = [0u8; 2];
     stored.copy_from_slice(crc);
-    if crc16::checksum(body) != u16::from_le_bytes(stored) {
+    if crc16::checksum(body) != u16::from_be_bytes(stored) {
         return Err(RejectReason::Crc);
     }
     let len = usize::from(*body.get(LEN_OFFSET).ok_or(RejectReason::Framing)?);
     let end = PAYLOAD_OFFSET.saturating_add(len);
     let payload = body.get(PAYLOAD_OFFSET..end).ok_or(RejectReason::Framing)?;
-    let padding = body.get(end..).ok_or(RejectReason::Framing)?;
-    if !all_zero(padding) {
+    if !padding_is_zero(frame, end) {
         return Err(RejectReason::Framing);
     }
     Ok(payload)
 }
 
-/// True if every byte of `bytes` is zero. A word at a time: the padding is most of the frame.
-fn all_zero(bytes: &[u8]) -> bool {
-    let words = bytes.chunks_exact(4);
-    let tail = words.remainder().iter().fold(0u8, |acc, &b| acc | b);
-    let ored = words.fold(0u32, |acc, w| {
-        let mut word = [0u8; 4];
-        word.copy_from_slice(w);
-        acc | u32::from_ne_bytes(word)
-    });
-    ored == 0 && tail == 0
+/// True if bytes `from..CRC_OFFSET` of `frame` are all zero (none when `from ≥ CRC_OFFSET`).
+///
+/// Eight bytes at a time over the whole frame, masking each word to the padding's bytes: always
+/// eight iterations, whatever the payload length.
+fn padding_is_zero(frame: &[u8; FRAME_LEN], from: usize) -> bool {
+    /// The low `n` bytes of a word set (`n` ≤ 8).
+    fn low_bytes(n: usize) -> u64 {
+        match u32::try_from(n.saturating_mul(8)) {
+            Ok(bits) if bits < 64 => (1u64 << bits).wrapping_sub(1),
+            _ => u64::MAX,
+        }
+    }
+    let (words, _) = frame.as_chunks::<8>();
+    let mut ored = 0u64;
+    let mut first = 0usize;
+    for w in words {
+        // Keep byte j of the frame when from ≤ j < CRC_OFFSET.
+        let below_end = low_bytes(CRC_OFFSET.saturating_sub(first).min(8));
+        let below_from = low_bytes(from.saturating_sub(first).min(8));
+        ored |= u64::from_le_bytes(*w) & below_end & !below_from;
+        first = first.saturating_add(8);
+    }
+    ored == 0
 }
 
 /// Encodes `cmd` into a complete frame (length, payload, zero padding, CRC); `protocol_version` is
@@ -360,23 +381,33 @@ pub fn decode_command(frame: &[u8; FRAME_LEN]) -> Result<MotorCommand, RejectRea
 
 /// Decodes a `MotorCommand` protobuf payload; returns the message and its `protocol_version`.
 fn decode_command_payload(payload: &[u8]) -> Result<(MotorCommand, u32), DecodeError> {
-    use command_field as f;
-    let mut cmd = MotorCommand::default();
-    let mut version = 0;
+    let mut msg = (MotorCommand::default(), 0);
     let mut r = Reader::new(payload);
     while let Some((field, v)) = r.next_field()? {
-        match field {
-            f::TIMESTAMP_US => cmd.timestamp_us = v.fixed32()?,
-            f::LEFT_SPEED_CMD => cmd.left_speed_cmd = v.float()?,
-            f::RIGHT_SPEED_CMD => cmd.right_speed_cmd = v.float()?,
-            f::CONTROL_MODE => cmd.control_mode = v.uint32_upto(0xFF)?,
-            f::ENABLE => cmd.enable = v.uint32_upto(1)? == 1,
-            f::SEQ => cmd.seq = v.fixed32()?,
-            f::PROTOCOL_VERSION => version = v.uint32()?,
-            _ => {}
-        }
+        apply_command_field(&mut msg, field, v)?;
     }
-    Ok((cmd, version))
+    Ok(msg)
+}
+
+/// One field of a `MotorCommand` payload into the message and version decoded so far.
+#[inline(always)]
+fn apply_command_field(
+    (cmd, version): &mut (MotorCommand, u32),
+    field: u32,
+    v: Value,
+) -> Result<(), DecodeError> {
+    use command_field as f;
+    match field {
+        f::TIMESTAMP_US => cmd.timestamp_us = v.fixed32()?,
+        f::LEFT_SPEED_CMD => cmd.left_speed_cmd = v.float()?,
+        f::RIGHT_SPEED_CMD => cmd.right_speed_cmd = v.float()?,
+        f::CONTROL_MODE => cmd.control_mode = v.uint32_upto(0xFF)?,
+        f::ENABLE => cmd.enable = v.uint32_upto(1)? == 1,
+        f::SEQ => cmd.seq = v.fixed32()?,
+        f::PROTOCOL_VERSION => *version = v.uint32()?,
+        _ => {}
+    }
+    Ok(())
 }
 
 /// Decodes a feedback frame; the same checks as [`decode_command`] (`fault_flags` > 0xFFFF and
@@ -391,28 +422,38 @@ pub fn decode_feedback(frame: &[u8; FRAME_LEN]) -> Result<MotorFeedback, RejectR
 }
 
 fn decode_feedback_payload(payload: &[u8]) -> Result<(MotorFeedback, u32), DecodeError> {
-    use feedback_field as f;
-    let mut fb = MotorFeedback::default();
-    let mut version = 0;
+    let mut msg = (MotorFeedback::default(), 0);
     let mut r = Reader::new(payload);
     while let Some((field, v)) = r.next_field()? {
-        match field {
-            f::TIMESTAMP_US => fb.timestamp_us = v.fixed32()?,
-            f::LEFT_SPEED => fb.left_speed = v.float()?,
-            f::RIGHT_SPEED => fb.right_speed = v.float()?,
-            f::LEFT_CURRENT => fb.left_current = v.float()?,
-            f::RIGHT_CURRENT => fb.right_current = v.float()?,
-            f::LEFT_ENCODER => fb.left_encoder = v.sint32()?,
-            f::RIGHT_ENCODER => fb.right_encoder = v.sint32()?,
-            f::FAULT_FLAGS => fb.fault_flags = v.uint32_upto(0xFFFF)?,
-            f::SEQ => fb.seq = v.fixed32()?,
-            f::MODE => fb.mode = v.uint32_upto(0xFF)?,
-            f::CMD_SEQ => fb.cmd_seq = v.fixed32()?,
-            f::PROTOCOL_VERSION => version = v.uint32()?,
-            _ => {}
-        }
+        apply_feedback_field(&mut msg, field, v)?;
     }
-    Ok((fb, version))
+    Ok(msg)
+}
+
+/// One field of a `MotorFeedback` payload into the message and version decoded so far.
+#[inline(always)]
+fn apply_feedback_field(
+    (fb, version): &mut (MotorFeedback, u32),
+    field: u32,
+    v: Value,
+) -> Result<(), DecodeError> {
+    use feedback_field as f;
+    match field {
+        f::TIMESTAMP_US => fb.timestamp_us = v.fixed32()?,
+        f::LEFT_SPEED => fb.left_speed = v.float()?,
+        f::RIGHT_SPEED => fb.right_speed = v.float()?,
+        f::LEFT_CURRENT => fb.left_current = v.float()?,
+        f::RIGHT_CURRENT => fb.right_current = v.float()?,
+        f::LEFT_ENCODER => fb.left_encoder = v.sint32()?,
+        f::RIGHT_ENCODER => fb.right_encoder = v.sint32()?,
+        f::FAULT_FLAGS => fb.fault_flags = v.uint32_upto(0xFFFF)?,
+        f::SEQ => fb.seq = v.fixed32()?,
+        f::MODE => fb.mode = v.uint32_upto(0xFF)?,
+        f::CMD_SEQ => fb.cmd_seq = v.fixed32()?,
+        f::PROTOCOL_VERSION => *version = v.uint32()?,
+        _ => {}
+    }
+    Ok(())
 }
 
 /// The ladder event for a received command frame: `Frame(command)` or `Rejected(reason)`.

@@ -108,6 +108,9 @@ pub fn checksum(bytes: &[u8]) -> u16 {
     reg
 }
 
+#[cfg(any(test, kani))]
+pub(crate) mod verification;
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -189,6 +189,12 @@ impl<'a> Reader<'a> {
         Self { rest: payload }
     }
 
+    /// Bytes not read yet.
+    #[cfg(any(test, kani))]
+    pub(crate) fn remaining(&self) -> usize {
+        self.rest.len()
+    }
+
     fn take(&mut self, n: usize) -> Result<&'a [u8], DecodeError> {
         if n > self.rest.len() {
             return Err(DecodeError);

@@ -425,7 +425,7 @@ fn crc_errors_report_reason_code_and_both_crcs() {
     let bad = flip(&hex, 3, 0x01);
     let e = err(FrameKind::AmrCommand, &bad);
     let b = parse_hex(&hex).unwrap();
-    let carried = u16::from_le_bytes([b[62], b[63]]);
+    let carried = u16::from_be_bytes([b[62], b[63]]);
     assert!(
         e.contains("Crc") && e.contains("RejectReason wire code 1"),
         "{e}"

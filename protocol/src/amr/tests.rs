@@ -8,7 +8,7 @@ fn frame_with(payload: &[u8]) -> [u8; FRAME_LEN] {
     f[0] = payload.len() as u8;
     f[1..1 + payload.len()].copy_from_slice(payload);
     let crc = crc16::checksum(&f[..62]);
-    f[62..].copy_from_slice(&crc.to_le_bytes());
+    f[62..].copy_from_slice(&crc.to_be_bytes());
     f
 }
 
@@ -78,13 +78,13 @@ fn framing_errors() {
     let mut f = frame_with(&V1);
     f[0] = 62;
     let crc = crc16::checksum(&f[..62]);
-    f[62..].copy_from_slice(&crc.to_le_bytes());
+    f[62..].copy_from_slice(&crc.to_be_bytes());
     assert_eq!(decode_command(&f), Err(RejectReason::Framing));
     // Non-zero padding, CRC valid.
     let mut f = frame_with(&V1);
     f[40] = 1;
     let crc = crc16::checksum(&f[..62]);
-    f[62..].copy_from_slice(&crc.to_le_bytes());
+    f[62..].copy_from_slice(&crc.to_be_bytes());
     assert_eq!(decode_command(&f), Err(RejectReason::Framing));
 }
 
@@ -272,4 +272,25 @@ fn a_repeated_frame_is_stale_for_the_ladder() {
     assert_eq!(ladder.counters().rejected(RejectReason::Stale), before + 1);
     f[10] ^= 1;
     assert_eq!(command_event(&f), Event::Rejected(RejectReason::Crc));
+}
+
+#[test]
+fn padding_check_covers_exactly_the_bytes_between_payload_and_crc() {
+    // For every payload length and every frame byte: a non-zero byte is refused as padding exactly
+    // when it lies after the payload and before the CRC (checked against a byte-by-byte rule).
+    for len in 0..=MAX_PAYLOAD {
+        let end = PAYLOAD_OFFSET + len;
+        for j in 0..FRAME_LEN {
+            let mut f = [0u8; FRAME_LEN];
+            f[j] = 0x40;
+            let expect_zero = !(end..CRC_OFFSET).contains(&j);
+            assert_eq!(padding_is_zero(&f, end), expect_zero, "len {len} byte {j}");
+        }
+        assert!(padding_is_zero(&[0u8; FRAME_LEN], end));
+    }
+    // Beyond the last payload length nothing is padding.
+    let mut f = [0xFFu8; FRAME_LEN];
+    f[0] = 0;
+    assert!(padding_is_zero(&f, CRC_OFFSET));
+    assert!(padding_is_zero(&f, usize::MAX));
 }

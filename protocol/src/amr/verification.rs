@@ -82,7 +82,7 @@ fn shaped_frame<S: Source>(
             let i = usize::from(src.below(CRC_OFFSET as u8));
             f[i] = src.u8();
             let crc = crc16::checksum(&f[..CRC_OFFSET]);
-            f[CRC_OFFSET..].copy_from_slice(&crc.to_le_bytes());
+            f[CRC_OFFSET..].copy_from_slice(&crc.to_be_bytes());
         }
     }
     f
@@ -233,13 +233,13 @@ mod proofs {
     }
 
     #[kani::proof]
-    #[kani::unwind(66)]
+    #[kani::unwind(15)]
     fn verify_command_round_trip() {
         check_command_round_trip(&mut KaniSource);
     }
 
     #[kani::proof]
-    #[kani::unwind(66)]
+    #[kani::unwind(15)]
     fn verify_feedback_round_trip() {
         check_feedback_round_trip(&mut KaniSource);
     }

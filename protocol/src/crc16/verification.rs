@@ -1,0 +1,227 @@
+//! What the CRC catches, for every link that stores it after the bytes it covers: Kani harnesses
+//! over error patterns and their `cargo test` twins.
+//!
+//! | link | CRC stored | caught: every burst of up to |
+//! |---|---|---|
+//! | seed 000 SPI frame | big-endian (codeword order) | 16 bits, anywhere in the frame |
+//! | seed 001 CDC frame, Teensy robust frame | little-endian (seed 001's rule) | 12 bits, anywhere |
+//!
+//! With the CRC stored little-endian its two bytes are swapped against the codeword order, and a
+//! 13-bit burst that ends in the low CRC byte can pass (`every_burst_by_byte_order` finds the
+//! shortest one at every checked length). Every single-bit error is caught in both orders.
+//!
+//! # Why checking error patterns alone is enough
+//!
+//! For a fixed length `n` the checksum is affine over GF(2): `C(x ⊕ e) = C(x) ⊕ C(e) ⊕ C(0ⁿ)`. Each
+//! slice table is linear (`T[a ⊕ b] = T[a] ⊕ T[b]`, checked for every entry by the test
+//! `tables_are_linear`), and [`checksum`] only XORs table entries indexed by data bytes XORed with
+//! register bytes, starting from the constant `INIT`. A sender puts `x` and `s = C(x)` on the wire;
+//! the receiver gets `x ⊕ e_x` and `s ⊕ e_s` and accepts iff `C(x ⊕ e_x) = s ⊕ e_s`, that is iff
+//! `C(e_x) ⊕ C(0ⁿ) = e_s` — whatever `x` was. So proving `C(e_x) ⊕ C(0ⁿ) ≠ e_s` for an error pattern
+//! proves that pattern is caught in *every* frame of that length.
+
+use super::checksum;
+use statemachine::harness::Source;
+use statemachine::{assume, cover};
+
+/// Longest run of covered bytes checked: the seed 000 frame body (62 bytes), which is longer than
+/// every seed 001 frame of the seed's messages and every Teensy robust frame body.
+pub(crate) const MAX_COVERED: usize = 62;
+
+/// The error in a codeword of `n` covered bytes followed by the CRC: a burst of at most `max_bits`
+/// bits (≤ 16) in transmission order (most significant bit of each byte first) starting anywhere, so
+/// every single-bit error too. Returns `(n, pattern)`, or `None` for a start past the codeword
+/// (assumed away).
+fn any_burst(src: &mut impl Source, max_bits: u32) -> Option<(usize, [u8; MAX_COVERED + 2])> {
+    let n = 1 + usize::from(src.below(MAX_COVERED as u8));
+    let total_bits = (n + 2) * 8;
+    let start = usize::from(src.u16());
+    if start >= total_bits {
+        return None;
+    }
+    // Bit 0 is the first wrong bit; any of the next 15 may be wrong too.
+    let pattern = (src.u16() | 1) & (u16::MAX >> 16u32.saturating_sub(max_bits));
+    let mut e = [0u8; MAX_COVERED + 2];
+    for i in 0..16 {
+        let bit = start + i;
+        if (pattern >> i) & 1 == 1 && bit < total_bits {
+            e[bit / 8] |= 0x80 >> (bit % 8);
+        }
+    }
+    Some((n, e))
+}
+
+/// Whether the CRC is stored most significant byte first (codeword order).
+#[derive(Clone, Copy, PartialEq, Eq)]
+pub(crate) enum Order {
+    /// Most significant byte first: seed 000.
+    Big,
+    /// Least significant byte first: seeds 001 and the Teensy robust frame.
+    Little,
+}
+
+impl Order {
+    /// The longest burst this storage order is proven to catch.
+    pub(crate) const fn max_burst(self) -> u32 {
+        match self {
+            Order::Big => 16,
+            Order::Little => 12,
+        }
+    }
+
+    fn read(self, b: [u8; 2]) -> u16 {
+        match self {
+            Order::Big => u16::from_be_bytes(b),
+            Order::Little => u16::from_le_bytes(b),
+        }
+    }
+}
+
+/// Every burst of up to [`Order::max_burst`] bits (every single-bit error among them) in a codeword
+/// of 1 to 62 covered bytes plus its CRC makes the received CRC disagree with the received bytes.
+pub(crate) fn check_bursts_detected(src: &mut impl Source, order: Order) {
+    let max_bits = order.max_burst();
+    let burst = any_burst(src, max_bits);
+    assume!(src, burst.is_some());
+    let Some((n, e)) = burst else { return };
+    let zeros = [0u8; MAX_COVERED];
+    let computed_change = checksum(&e[..n]) ^ checksum(&zeros[..n]);
+    let stored_change = order.read([e[n], e[n + 1]]);
+    assert!(computed_change != stored_change);
+    let body_hit = e[..n].iter().any(|&b| b != 0);
+    let crc_hit = stored_change != 0;
+    let wrong_bits: u32 = e.iter().map(|b| b.count_ones()).sum();
+    cover!(src, wrong_bits == 1, "single-bit error");
+    cover!(
+        src,
+        wrong_bits == max_bits,
+        "longest burst, every bit wrong"
+    );
+    cover!(
+        src,
+        body_hit && crc_hit,
+        "burst across the end of the covered bytes"
+    );
+    cover!(src, !body_hit && crc_hit, "burst in the stored CRC only");
+    cover!(src, n == MAX_COVERED && body_hit, "burst in a 62-byte body");
+}
+
+/// [`check_bursts_detected`] for the seed 000 frame's order.
+pub(crate) fn check_bursts_detected_big_endian(src: &mut impl Source) {
+    check_bursts_detected(src, Order::Big);
+}
+
+/// [`check_bursts_detected`] for seed 001's and the Teensy frame's order.
+pub(crate) fn check_bursts_detected_little_endian(src: &mut impl Source) {
+    check_bursts_detected(src, Order::Little);
+}
+
+#[cfg(kani)]
+mod proofs {
+    use statemachine::harness::KaniSource;
+
+    #[kani::proof]
+    #[kani::unwind(17)]
+    fn verify_bursts_detected_big_endian() {
+        super::check_bursts_detected_big_endian(&mut KaniSource);
+    }
+
+    #[kani::proof]
+    #[kani::unwind(17)]
+    fn verify_bursts_detected_little_endian() {
+        super::check_bursts_detected_little_endian(&mut KaniSource);
+    }
+}
+
+#[cfg(test)]
+mod twins {
+    use super::*;
+    use crate::crc16::TABLES;
+    use statemachine::harness::Twin;
+
+    #[test]
+    fn bursts_detected_big_endian() {
+        Twin::run(0xC8C_0001, 200_000, check_bursts_detected_big_endian).assert_covered(5);
+    }
+
+    #[test]
+    fn bursts_detected_little_endian() {
+        Twin::run(0xC8C_0002, 200_000, check_bursts_detected_little_endian).assert_covered(5);
+    }
+
+    /// The premise of the module: every slice table is linear over GF(2), for every pair of entries.
+    #[test]
+    fn tables_are_linear() {
+        for (k, t) in TABLES.iter().enumerate() {
+            for a in 0..256usize {
+                for b in 0..256usize {
+                    assert_eq!(t[a ^ b], t[a] ^ t[b], "table {k}, {a} ^ {b}");
+                }
+            }
+        }
+    }
+
+    /// The affine identity itself, on random data of every length up to two blocks past a frame.
+    #[test]
+    fn checksum_is_affine() {
+        let mut t = Twin::new(0xAFF1);
+        let zeros = [0u8; 96];
+        for n in 0..96 {
+            for _ in 0..200 {
+                let mut x = [0u8; 96];
+                let mut y = [0u8; 96];
+                for i in 0..n {
+                    x[i] = t.u8();
+                    y[i] = t.u8();
+                }
+                let mut xy = [0u8; 96];
+                for i in 0..n {
+                    xy[i] = x[i] ^ y[i];
+                }
+                assert_eq!(
+                    checksum(&xy[..n]),
+                    checksum(&x[..n]) ^ checksum(&y[..n]) ^ checksum(&zeros[..n]),
+                    "n {n}"
+                );
+            }
+        }
+    }
+
+    /// The shortest burst each byte order lets through, exhaustively (every start bit, every
+    /// pattern of up to 16 bits) at the lengths the links use: none up to 16 bits with the CRC
+    /// big-endian; 13 bits with it little-endian. This is where [`Order::max_burst`] comes from.
+    #[test]
+    fn every_burst_by_byte_order() {
+        // Covered lengths: CDC PING (2), ESTOP (3), ACK (4), PWM and STATUS (12), IMU (22); Teensy
+        // robust bodies for 1 and 4 motors (25, 37); the seed 000 body (62).
+        for n in [2usize, 3, 4, 12, 22, 25, 37, MAX_COVERED] {
+            let zeros = [0u8; MAX_COVERED];
+            let base = checksum(&zeros[..n]);
+            for order in [Order::Big, Order::Little] {
+                let mut shortest = u32::MAX;
+                for start in 0..(n + 2) * 8 {
+                    for pattern in (1u32..1 << 16).step_by(2) {
+                        let bits = 32 - pattern.leading_zeros();
+                        if bits >= shortest || start + bits as usize > (n + 2) * 8 {
+                            continue;
+                        }
+                        let mut e = [0u8; MAX_COVERED + 2];
+                        for i in 0..16 {
+                            if (pattern >> i) & 1 == 1 {
+                                let bit = start + i;
+                                e[bit / 8] |= 0x80 >> (bit % 8);
+                            }
+                        }
+                        if checksum(&e[..n]) ^ base == order.read([e[n], e[n + 1]]) {
+                            shortest = bits;
+                        }
+                    }
+                }
+                match order {
+                    Order::Big => assert_eq!(shortest, u32::MAX, "n {n}: a burst passed"),
+                    Order::Little => assert_eq!(shortest, order.max_burst() + 1, "n {n}"),
+                }
+            }
+        }
+    }
+}
