@@ -301,14 +301,15 @@ fn padding_is_zero(frame: &[u8; FRAME_LEN], from: usize) -> bool {
             _ => u64::MAX,
         }
     }
-    let (words, _) = frame.as_chunks::<8>();
     let mut ored = 0u64;
     let mut first = 0usize;
-    for w in words {
+    for chunk in frame.chunks_exact(8) {
+        let mut w = [0u8; 8];
+        w.copy_from_slice(chunk);
         // Keep byte j of the frame when from ≤ j < CRC_OFFSET.
         let below_end = low_bytes(CRC_OFFSET.saturating_sub(first).min(8));
         let below_from = low_bytes(from.saturating_sub(first).min(8));
-        ored |= u64::from_le_bytes(*w) & below_end & !below_from;
+        ored |= u64::from_le_bytes(w) & below_end & !below_from;
         first = first.saturating_add(8);
     }
     ored == 0

@@ -35,6 +35,14 @@ pub trait Source {
     }
     /// Any speed in `-max ..= max` (max ≥ 0). Kani: any value, assumed in range; tests: biased to the ends.
     fn speed_within(&mut self, max: Speed) -> Speed;
+    /// Any `N` bytes. Kani: one symbolic array, with no loop to unwind.
+    fn bytes<const N: usize>(&mut self) -> [u8; N] {
+        let mut out = [0u8; N];
+        for b in out.iter_mut() {
+            *b = self.u8();
+        }
+        out
+    }
     /// A value in `0..n` (n ≥ 1); used to pick among enum variants.
     fn below(&mut self, n: u8) -> u8 {
         self.u8().checked_rem(n).unwrap_or(0)
@@ -83,6 +91,9 @@ impl Source for KaniSource {
         kani::any()
     }
     fn f32(&mut self) -> f32 {
+        kani::any()
+    }
+    fn bytes<const N: usize>(&mut self) -> [u8; N] {
         kani::any()
     }
     fn speed_within(&mut self, max: Speed) -> Speed {
