@@ -56,7 +56,7 @@ def command(ts: int, left: float, right: float, mode: int, enable: int, seq: int
     p += key(8, 0) + varint(VERSION)
     body = bytes([len(p)]) + bytes(p)
     body += bytes(FRAME_LEN - 2 - len(body))
-    return body + struct.pack("<H", crc16_ccitt_false(body))
+    return body + struct.pack(">H", crc16_ccitt_false(body))
 
 
 def main(path: str) -> None:

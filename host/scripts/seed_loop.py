@@ -40,7 +40,7 @@ def main():
         wl = (v - omega * wheelbase / 2) / radius
         wr = (v + omega * wheelbase / 2) / radius
         body = struct.pack("<Iffbb", int(now * 1e6) & 0xFFFFFFFF, wl, wr, 1, 1).ljust(62, b"\0")
-        frame = body + struct.pack("<H", crc16_ccitt(body))
+        frame = body + struct.pack(">H", crc16_ccitt(body))
         assert len(frame) == 64
         time.sleep(0.001)
     n = len(periods)
