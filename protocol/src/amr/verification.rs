@@ -327,7 +327,7 @@ mod proofs {
     use statemachine::harness::KaniSource;
 
     #[cfg_attr(kani_pending, kani::proof)]
-    #[kani::unwind(9)]
+    #[cfg_attr(kani_pending, kani::unwind(9))]
     fn verify_open_total() {
         check_open_total(&mut KaniSource);
     }
@@ -345,37 +345,37 @@ mod proofs {
     }
 
     #[cfg_attr(kani_pending, kani::proof)]
-    #[kani::unwind(66)]
+    #[cfg_attr(kani_pending, kani::unwind(66))]
     fn verify_decode_command_total() {
         check_decode_command_total(&mut KaniSource);
     }
 
     #[cfg_attr(kani_pending, kani::proof)]
-    #[kani::unwind(66)]
+    #[cfg_attr(kani_pending, kani::unwind(66))]
     fn verify_decode_feedback_total() {
         check_decode_feedback_total(&mut KaniSource);
     }
 
     #[cfg_attr(kani_pending, kani::proof)]
-    #[kani::unwind(15)]
+    #[cfg_attr(kani_pending, kani::unwind(15))]
     fn verify_command_round_trip() {
         check_command_round_trip(&mut KaniSource);
     }
 
     #[cfg_attr(kani_pending, kani::proof)]
-    #[kani::unwind(15)]
+    #[cfg_attr(kani_pending, kani::unwind(15))]
     fn verify_feedback_round_trip() {
         check_feedback_round_trip(&mut KaniSource);
     }
 
     #[cfg_attr(kani_pending, kani::proof)]
-    #[kani::unwind(66)]
+    #[cfg_attr(kani_pending, kani::unwind(66))]
     fn verify_command_bit_flip_detected() {
         check_command_bit_flip_detected(&mut KaniSource);
     }
 
     #[cfg_attr(kani_pending, kani::proof)]
-    #[kani::unwind(66)]
+    #[cfg_attr(kani_pending, kani::unwind(66))]
     fn verify_feedback_bit_flip_detected() {
         check_feedback_bit_flip_detected(&mut KaniSource);
     }

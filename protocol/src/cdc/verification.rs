@@ -194,25 +194,25 @@ mod proofs {
     use statemachine::harness::KaniSource;
 
     #[cfg_attr(kani_pending, kani::proof)]
-    #[kani::unwind(30)]
+    #[cfg_attr(kani_pending, kani::unwind(30))]
     fn verify_decode_frame_total() {
         check_decode_frame_total(&mut KaniSource);
     }
 
     #[cfg_attr(kani_pending, kani::proof)]
-    #[kani::unwind(30)]
+    #[cfg_attr(kani_pending, kani::unwind(30))]
     fn verify_stream_total() {
         check_stream_total(&mut KaniSource);
     }
 
     #[cfg_attr(kani_pending, kani::proof)]
-    #[kani::unwind(30)]
+    #[cfg_attr(kani_pending, kani::unwind(30))]
     fn verify_round_trip() {
         check_round_trip(&mut KaniSource);
     }
 
     #[cfg_attr(kani_pending, kani::proof)]
-    #[kani::unwind(30)]
+    #[cfg_attr(kani_pending, kani::unwind(30))]
     fn verify_bit_flip_detected() {
         check_bit_flip_detected(&mut KaniSource);
     }

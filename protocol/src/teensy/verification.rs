@@ -106,19 +106,19 @@ mod proofs {
     use statemachine::harness::KaniSource;
 
     #[cfg_attr(kani_pending, kani::proof)]
-    #[kani::unwind(90)]
+    #[cfg_attr(kani_pending, kani::unwind(90))]
     fn verify_decode_total() {
         check_decode_total(&mut KaniSource);
     }
 
     #[cfg_attr(kani_pending, kani::proof)]
-    #[kani::unwind(90)]
+    #[cfg_attr(kani_pending, kani::unwind(90))]
     fn verify_round_trip() {
         check_round_trip(&mut KaniSource);
     }
 
     #[cfg_attr(kani_pending, kani::proof)]
-    #[kani::unwind(90)]
+    #[cfg_attr(kani_pending, kani::unwind(90))]
     fn verify_bit_flip_detected() {
         check_bit_flip_detected(&mut KaniSource);
     }
