@@ -372,22 +372,31 @@ fn write_feedback(w: &mut Writer<'_>, fb: &MotorFeedback) {
 /// known field, `enable` not 0/1, `control_mode` > 255); version ([`RejectReason::Version`]).
 /// Unknown fields are skipped; a repeated field keeps its last value.
 pub fn decode_command(frame: &[u8; FRAME_LEN]) -> Result<MotorCommand, RejectReason> {
+    decode_message(frame, apply_command_field)
+}
+
+/// The steps both messages share: `open` the frame, read its fields into a default message with
+/// `apply`, then check the version.
+#[inline(always)]
+fn decode_message<M: Default>(
+    frame: &[u8; FRAME_LEN],
+    apply: impl Fn(&mut (M, u32), u32, Value) -> Result<(), DecodeError>,
+) -> Result<M, RejectReason> {
     let payload = open(frame)?;
-    let (cmd, version) = decode_command_payload(payload).map_err(|_| RejectReason::Decode)?;
+    let mut msg = (M::default(), 0);
+    let mut r = Reader::new(payload);
+    let mut read_all = || -> Result<(), DecodeError> {
+        while let Some((field, v)) = r.next_field()? {
+            apply(&mut msg, field, v)?;
+        }
+        Ok(())
+    };
+    read_all().map_err(|_| RejectReason::Decode)?;
+    let (m, version) = msg;
     if version != PROTOCOL_VERSION {
         return Err(RejectReason::Version);
     }
-    Ok(cmd)
-}
-
-/// Decodes a `MotorCommand` protobuf payload; returns the message and its `protocol_version`.
-fn decode_command_payload(payload: &[u8]) -> Result<(MotorCommand, u32), DecodeError> {
-    let mut msg = (MotorCommand::default(), 0);
-    let mut r = Reader::new(payload);
-    while let Some((field, v)) = r.next_field()? {
-        apply_command_field(&mut msg, field, v)?;
-    }
-    Ok(msg)
+    Ok(m)
 }
 
 /// One field of a `MotorCommand` payload into the message and version decoded so far.
@@ -414,21 +423,7 @@ fn apply_command_field(
 /// Decodes a feedback frame; the same checks as [`decode_command`] (`fault_flags` > 0xFFFF and
 /// `mode` > 255 are [`RejectReason::Decode`]).
 pub fn decode_feedback(frame: &[u8; FRAME_LEN]) -> Result<MotorFeedback, RejectReason> {
-    let payload = open(frame)?;
-    let (fb, version) = decode_feedback_payload(payload).map_err(|_| RejectReason::Decode)?;
-    if version != PROTOCOL_VERSION {
-        return Err(RejectReason::Version);
-    }
-    Ok(fb)
-}
-
-fn decode_feedback_payload(payload: &[u8]) -> Result<(MotorFeedback, u32), DecodeError> {
-    let mut msg = (MotorFeedback::default(), 0);
-    let mut r = Reader::new(payload);
-    while let Some((field, v)) = r.next_field()? {
-        apply_feedback_field(&mut msg, field, v)?;
-    }
-    Ok(msg)
+    decode_message(frame, apply_feedback_field)
 }
 
 /// One field of a `MotorFeedback` payload into the message and version decoded so far.

@@ -88,57 +88,45 @@ fn shaped_frame<S: Source>(
     f
 }
 
-/// `decode_command` returns `Ok` or a frame-level error for every 64-byte input.
-pub(crate) fn check_decode_command_total(src: &mut impl Source) {
-    let f = shaped_frame(src, |s, f| encode_command(&any_command(s), f));
-    let r = decode_command(&f);
+/// `decode` returns `Ok` or a frame-level error for every 64-byte input ([`shaped_frame`] shapes,
+/// `encode_valid` supplying the valid frames).
+fn decode_total<S: Source, M>(
+    src: &mut S,
+    encode_valid: impl FnOnce(&mut S, &mut [u8; FRAME_LEN]),
+    decode: impl Fn(&[u8; FRAME_LEN]) -> Result<M, RejectReason>,
+) {
+    let f = shaped_frame(src, encode_valid);
+    let r = decode(&f).map(|_| ());
     assert!(matches!(
         r,
-        Ok(_)
+        Ok(())
             | Err(RejectReason::Crc
                 | RejectReason::Framing
                 | RejectReason::Decode
                 | RejectReason::Version)
     ));
-    cover!(src, r.is_ok(), "command decoded");
-    cover!(src, r == Err(RejectReason::Crc), "command crc error");
-    cover!(
+    cover!(src, r.is_ok(), "decoded");
+    cover!(src, r == Err(RejectReason::Crc), "crc error");
+    cover!(src, r == Err(RejectReason::Framing), "framing error");
+    cover!(src, r == Err(RejectReason::Decode), "decode error");
+    cover!(src, r == Err(RejectReason::Version), "version error");
+}
+
+/// [`decode_total`] for `decode_command`.
+pub(crate) fn check_decode_command_total(src: &mut impl Source) {
+    decode_total(
         src,
-        r == Err(RejectReason::Framing),
-        "command framing error"
-    );
-    cover!(src, r == Err(RejectReason::Decode), "command decode error");
-    cover!(
-        src,
-        r == Err(RejectReason::Version),
-        "command version error"
+        |s, f| encode_command(&any_command(s), f),
+        decode_command,
     );
 }
 
-/// `decode_feedback` returns `Ok` or a frame-level error for every 64-byte input.
+/// [`decode_total`] for `decode_feedback`.
 pub(crate) fn check_decode_feedback_total(src: &mut impl Source) {
-    let f = shaped_frame(src, |s, f| encode_feedback(&any_feedback(s), f));
-    let r = decode_feedback(&f);
-    assert!(matches!(
-        r,
-        Ok(_)
-            | Err(RejectReason::Crc
-                | RejectReason::Framing
-                | RejectReason::Decode
-                | RejectReason::Version)
-    ));
-    cover!(src, r.is_ok(), "feedback decoded");
-    cover!(src, r == Err(RejectReason::Crc), "feedback crc error");
-    cover!(
+    decode_total(
         src,
-        r == Err(RejectReason::Framing),
-        "feedback framing error"
-    );
-    cover!(src, r == Err(RejectReason::Decode), "feedback decode error");
-    cover!(
-        src,
-        r == Err(RejectReason::Version),
-        "feedback version error"
+        |s, f| encode_feedback(&any_feedback(s), f),
+        decode_feedback,
     );
 }
 
@@ -262,56 +250,65 @@ fn any_payload(src: &mut impl Source) -> ([u8; MAX_PAYLOAD], usize) {
     (src.bytes(), usize::from(src.below(MAX_PAYLOAD as u8 + 1)))
 }
 
-/// One iteration of the command decode loop, from any reader state and any message decoded so far,
-/// never panics, and either ends the loop (end of payload or an error) or consumes at least two bytes.
-pub(crate) fn check_command_field_step(src: &mut impl Source) {
+/// One iteration of a decode loop (`next_field`, then `apply` into `msg`), from any reader state:
+/// never panics, and either ends the loop (end of payload or an error) or consumes at least two
+/// bytes. Returns the field read and what applying it gave, for the caller's covers.
+fn field_step<S: Source, M>(
+    src: &mut S,
+    mut msg: (M, u32),
+    apply: impl Fn(&mut (M, u32), u32, Value) -> Result<(), DecodeError>,
+) -> Option<(u32, Result<(), DecodeError>)> {
     let (buf, len) = any_payload(src);
     let mut r = Reader::new(&buf[..len]);
-    let mut msg = (any_command(src), src.u32());
     match r.next_field() {
         Ok(Some((field, v))) => {
             assert!(r.remaining() + 2 <= len);
-            let applied = apply_command_field(&mut msg, field, v);
-            cover!(
-                src,
-                applied.is_ok() && field == command_field::ENABLE,
-                "enable read"
-            );
-            cover!(
-                src,
-                applied.is_ok() && field == command_field::LEFT_SPEED_CMD,
-                "speed read"
-            );
+            let applied = apply(&mut msg, field, v);
             cover!(src, applied.is_err(), "field refused");
-            cover!(
-                src,
-                field > command_field::PROTOCOL_VERSION,
-                "unknown field skipped"
-            );
+            Some((field, applied))
         }
-        Ok(None) => assert_eq!(len, 0),
-        Err(_) => cover!(src, len > 0, "malformed key or value"),
+        Ok(None) => {
+            assert_eq!(len, 0);
+            None
+        }
+        Err(_) => {
+            cover!(src, len > 0, "malformed key or value");
+            None
+        }
     }
 }
 
-/// [`check_command_field_step`] for the feedback decode loop.
+/// [`field_step`] of the command decode loop, from any command decoded so far.
+pub(crate) fn check_command_field_step(src: &mut impl Source) {
+    let msg = (any_command(src), src.u32());
+    if let Some((field, applied)) = field_step(src, msg, apply_command_field) {
+        cover!(
+            src,
+            applied.is_ok() && field == command_field::ENABLE,
+            "enable read"
+        );
+        cover!(
+            src,
+            applied.is_ok() && field == command_field::LEFT_SPEED_CMD,
+            "speed read"
+        );
+        cover!(
+            src,
+            field > command_field::PROTOCOL_VERSION,
+            "unknown field skipped"
+        );
+    }
+}
+
+/// [`field_step`] of the feedback decode loop, from any feedback decoded so far.
 pub(crate) fn check_feedback_field_step(src: &mut impl Source) {
-    let (buf, len) = any_payload(src);
-    let mut r = Reader::new(&buf[..len]);
-    let mut msg = (any_feedback(src), src.u32());
-    match r.next_field() {
-        Ok(Some((field, v))) => {
-            assert!(r.remaining() + 2 <= len);
-            let applied = apply_feedback_field(&mut msg, field, v);
-            cover!(
-                src,
-                applied.is_ok() && field == feedback_field::LEFT_ENCODER,
-                "encoder read"
-            );
-            cover!(src, applied.is_err(), "field refused");
-        }
-        Ok(None) => assert_eq!(len, 0),
-        Err(_) => cover!(src, len > 0, "malformed key or value"),
+    let msg = (any_feedback(src), src.u32());
+    if let Some((field, applied)) = field_step(src, msg, apply_feedback_field) {
+        cover!(
+            src,
+            applied.is_ok() && field == feedback_field::LEFT_ENCODER,
+            "encoder read"
+        );
     }
 }
 
