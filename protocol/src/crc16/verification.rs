@@ -30,13 +30,8 @@ pub(crate) const MAX_COVERED: usize = 62;
 
 /// The error in a codeword of `n` covered bytes followed by the CRC: a burst of at most `max_bits`
 /// bits (≤ 16) in transmission order (most significant bit of each byte first) starting anywhere, so
-/// every single-bit error too. Returns `(n, pattern)`, or `None` for a start past the codeword
-/// (assumed away).
-fn any_burst(
-    src: &mut impl Source,
-    n: usize,
-    max_bits: u32,
-) -> Option<(usize, [u8; MAX_COVERED + 2])> {
+/// every single-bit error too. `None` for a start past the codeword (assumed away).
+fn any_burst(src: &mut impl Source, n: usize, max_bits: u32) -> Option<[u8; MAX_COVERED + 2]> {
     let total_bits = (n + 2) * 8;
     let start = usize::from(src.u16());
     if start >= total_bits {
@@ -48,10 +43,22 @@ fn any_burst(
     for i in 0..16 {
         let bit = start + i;
         if (pattern >> i) & 1 == 1 && bit < total_bits {
-            e[bit / 8] |= 0x80 >> (bit % 8);
+            set_bit(&mut e, bit);
         }
     }
-    Some((n, e))
+    Some(e)
+}
+
+/// Sets bit `bit` of `e` in transmission order (most significant bit of each byte first).
+fn set_bit(e: &mut [u8; MAX_COVERED + 2], bit: usize) {
+    e[bit / 8] |= 0x80 >> (bit % 8);
+}
+
+/// What error `e` in a codeword of `n` covered bytes plus CRC does to the receiver's check: the
+/// change of the computed CRC XOR the change of the stored one (`zeros_crc` is the CRC of `n` zero
+/// bytes). By the affine identity the error passes iff this is zero, whatever the frame.
+fn syndrome(e: &[u8; MAX_COVERED + 2], n: usize, order: Order, zeros_crc: u16) -> u16 {
+    checksum(&e[..n]) ^ zeros_crc ^ order.read([e[n], e[n + 1]])
 }
 
 /// Whether the CRC is stored most significant byte first (codeword order).
@@ -88,13 +95,11 @@ pub(crate) fn check_bursts_detected(src: &mut impl Source, order: Order, n: usiz
     let max_bits = order.max_burst();
     let burst = any_burst(src, n, max_bits);
     assume!(src, burst.is_some());
-    let Some((n, e)) = burst else { return };
+    let Some(e) = burst else { return };
     let zeros = [0u8; MAX_COVERED];
-    let computed_change = checksum(&e[..n]) ^ checksum(&zeros[..n]);
-    let stored_change = order.read([e[n], e[n + 1]]);
-    assert!(computed_change != stored_change);
+    assert!(syndrome(&e, n, order, checksum(&zeros[..n])) != 0);
     let body_hit = e[..n].iter().any(|&b| b != 0);
-    let crc_hit = stored_change != 0;
+    let crc_hit = e[n] != 0 || e[n + 1] != 0;
     let wrong_bits: u32 = e.iter().map(|b| b.count_ones()).sum();
     cover!(src, wrong_bits == 1, "single-bit error");
     cover!(
@@ -209,8 +214,8 @@ mod twins {
             for order in [Order::Big, Order::Little] {
                 let column = |j: usize| -> u16 {
                     let mut e = [0u8; MAX_COVERED + 2];
-                    e[j / 8] = 0x80 >> (j % 8);
-                    checksum(&e[..n]) ^ base ^ order.read([e[n], e[n + 1]])
+                    set_bit(&mut e, j);
+                    syndrome(&e, n, order, base)
                 };
                 let columns: std::vec::Vec<u16> = (0..bits).map(column).collect();
                 let mut shortest = u32::MAX;
