@@ -270,9 +270,6 @@ fn seal(out: &mut [u8; FRAME_LEN], payload_len: usize) {
 }
 
 /// Checks CRC, length and padding; returns the payload.
-///
-/// Every loop here has a fixed trip count (the CRC's blocks, the padding's eight words), so the time
-/// is the same for every frame and a model checker unrolls it completely.
 fn open(frame: &[u8; FRAME_LEN]) -> Result<&[u8], RejectReason> {
     let (body, crc) = frame.split_at(CRC_OFFSET);
     let mut stored = [0u8; 2];
@@ -290,29 +287,20 @@ fn open(frame: &[u8; FRAME_LEN]) -> Result<&[u8], RejectReason> {
 }
 
 /// True if bytes `from..CRC_OFFSET` of `frame` are all zero (none when `from ≥ CRC_OFFSET`).
-///
-/// Eight bytes at a time over the whole frame, masking each word to the padding's bytes: always
-/// eight iterations, whatever the payload length.
 fn padding_is_zero(frame: &[u8; FRAME_LEN], from: usize) -> bool {
-    /// The low `n` bytes of a word set (`n` ≤ 8).
-    fn low_bytes(n: usize) -> u64 {
-        match u32::try_from(n.saturating_mul(8)) {
-            Ok(bits) if bits < 64 => (1u64 << bits).wrapping_sub(1),
-            _ => u64::MAX,
-        }
-    }
-    let mut ored = 0u64;
-    let mut first = 0usize;
-    for chunk in frame.chunks_exact(8) {
-        let mut w = [0u8; 8];
-        w.copy_from_slice(chunk);
-        // Keep byte j of the frame when from ≤ j < CRC_OFFSET.
-        let below_end = low_bytes(CRC_OFFSET.saturating_sub(first).min(8));
-        let below_from = low_bytes(from.saturating_sub(first).min(8));
-        ored |= u64::from_le_bytes(w) & below_end & !below_from;
-        first = first.saturating_add(8);
-    }
-    ored == 0
+    frame.get(from..CRC_OFFSET).is_none_or(all_zero)
+}
+
+/// True if every byte of `bytes` is zero. A word at a time: the padding is most of the frame.
+fn all_zero(bytes: &[u8]) -> bool {
+    let words = bytes.chunks_exact(4);
+    let tail = words.remainder().iter().fold(0u8, |acc, &b| acc | b);
+    let ored = words.fold(0u32, |acc, w| {
+        let mut word = [0u8; 4];
+        word.copy_from_slice(w);
+        acc | u32::from_ne_bytes(word)
+    });
+    ored == 0 && tail == 0
 }
 
 /// Encodes `cmd` into a complete frame (length, payload, zero padding, CRC); `protocol_version` is
