@@ -14,8 +14,7 @@
 //!
 //! Every decoder is total: for every input it returns `Ok` or a typed error. The harnesses in each
 //! module's `verification` submodule state this (and round-trips, and bit-flip detection) and run as
-//! `cargo test` twins; under Kani the seed 000 decode-loop steps and the CRC error patterns are
-//! proven, the rest are pending (`cfg(kani_pending)`, see `proofs/REPORT.md`); `tests/fuzz.rs`
+//! `cargo test` twins; under Kani the seed 000 decode-loop steps are proven, the rest are pending (`cfg(kani_pending)`, see `proofs/REPORT.md`); `tests/fuzz.rs`
 //! fuzzes every decoder with bolero.
 //!
 //! Feature `serde` (no_std, no alloc) derives `Serialize`/`Deserialize` on the plain message structs
