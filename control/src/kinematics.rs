@@ -1,19 +1,28 @@
 //! Differential-drive kinematics: body twist (v, ω) ↔ wheel speeds (ω_L, ω_R).
 //!
 //! ```text
-//!   inverse:  ω_L = (v − ω·L/2) / r        forward:  v = r·(ω_L + ω_R) / 2
-//!             ω_R = (v + ω·L/2) / r                  ω = r·(ω_R − ω_L) / L
+//!   inverse:  ω_L = v/r − ω·L/(2r)        forward:  v = (ω_L + ω_R)·r/2
+//!             ω_R = v/r + ω·L/(2r)                  ω = (ω_R − ω_L)·r/L
 //! ```
 //!
 //! L is the wheelbase (track width, wheel contact to wheel contact), r the wheel radius. The ratios
-//! 1/r, L/2, r/2 and r/L are computed once in [`DiffDrive::new`], so a conversion is multiplies and
+//! 1/r, L/(2r), r/2 and r/L are computed once in [`DiffDrive::new`], so a conversion is multiplies and
 //! adds only (no division on the control path).
+//!
+//! Each conversion sums exact 64-bit products of the Q16.16 bit patterns and rounds once, to the
+//! nearest Q16.16 value, at the end: nothing saturates on the way, and only a result outside the
+//! Q16.16 range (beyond ±32 767 rad/s or m/s, far past any motor) is clamped to it. The geometry
+//! limits keep every precomputed ratio inside Q16.16 and every sum inside `i64`; the bounds are
+//! spelled out at [`DiffDrive::new`]. The `i64` operations are written saturating so that no
+//! arithmetic can wrap or panic even if those bounds were wrong; with them, none saturates.
 
 use crate::{Meters, MetersPerSecond, Q};
 use statemachine::Speed;
 
 const MIN_RADIUS: Q = Q::lit("0.001");
+const MAX_RADIUS: Q = Q::const_from_int(10);
 const MIN_BASE: Q = Q::lit("0.01");
+const MAX_BASE: Q = Q::const_from_int(64);
 
 /// Body velocity: forward speed and yaw rate.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -31,7 +40,7 @@ pub struct Twist {
 pub enum KinematicsError {
     /// Wheel radius must be between 1 mm and 10 m.
     WheelRadius = 1,
-    /// Wheelbase must be between 1 cm and 100 m.
+    /// Wheelbase must be between 1 cm and 64 m.
     Wheelbase = 2,
 }
 
@@ -41,24 +50,47 @@ pub struct DiffDrive {
     wheelbase: Meters,
     radius: Meters,
     inv_radius: Q,
-    half_base: Q,
+    half_base_over_radius: Q,
     half_radius: Q,
     radius_over_base: Q,
 }
 
+/// `Σ aᵢ·bᵢ` of Q16.16 bit patterns (a Q32.32 value) rounded to the nearest Q16.16, ties upward, and
+/// clamped to the Q16.16 range.
+fn round_q(q32_32: i64) -> Q {
+    // Callers keep |q32_32| < 2⁶³ − 2¹⁵ (see `DiffDrive::new`), so the saturating add of the
+    // rounding bias is a guard that never triggers.
+    let bits = q32_32.saturating_add(1 << 15) >> 16;
+    Q::from_bits(i32::try_from(bits).unwrap_or(if bits < 0 { i32::MIN } else { i32::MAX }))
+}
+
+/// The exact product of two Q16.16 bit patterns as Q32.32: |a·b| ≤ 2⁶² for any two `i32`, so the
+/// saturating multiply never saturates (it only keeps the arithmetic visibly overflow-free).
+fn wide(a: Q, b: Q) -> i64 {
+    i64::from(a.to_bits()).saturating_mul(i64::from(b.to_bits()))
+}
+
 impl DiffDrive {
     /// Checks the geometry and precomputes the ratios.
+    ///
+    /// With 1 mm ≤ r ≤ 10 m and 1 cm ≤ L ≤ 64 m: 1/r ≤ 1000, L/(2r) ≤ 32 000, r/2 ≤ 5 and r/L ≤ 1000
+    /// all fit Q16.16 (< 32 768). The conversions then stay inside `i64`:
+    /// - inverse: |v·(1/r)| < 2³¹·1000·2¹⁶ < 2⁵⁷ and |ω·L/(2r)| < 2³¹·32 000·2¹⁶ < 2⁶², sum < 2⁶³ − 2¹⁵;
+    /// - forward: |ω_L + ω_R| ≤ 2³², times r/2 < 2²⁰ or r/L < 2²⁶ stays below 2⁵⁸.
     pub fn new(wheelbase: Meters, wheel_radius: Meters) -> Result<Self, KinematicsError> {
-        if wheel_radius < MIN_RADIUS || wheel_radius > Q::const_from_int(10) {
+        if wheel_radius < MIN_RADIUS || wheel_radius > MAX_RADIUS {
             return Err(KinematicsError::WheelRadius);
         }
-        if wheelbase < MIN_BASE || wheelbase > Q::const_from_int(100) {
+        if wheelbase < MIN_BASE || wheelbase > MAX_BASE {
             return Err(KinematicsError::Wheelbase);
         }
-        // Both divisors are checked non-zero above and the quotients (≤ 1000, ≤ 1000) fit Q16.16.
+        // Both divisors are checked non-zero above and every quotient fits Q16.16 (bounds above).
         let inv_radius = Q::ONE
             .checked_div(wheel_radius)
             .ok_or(KinematicsError::WheelRadius)?;
+        let half_base_over_radius = Q::from_bits(wheelbase.to_bits() >> 1)
+            .checked_div(wheel_radius)
+            .ok_or(KinematicsError::Wheelbase)?;
         let radius_over_base = wheel_radius
             .checked_div(wheelbase)
             .ok_or(KinematicsError::Wheelbase)?;
@@ -66,7 +98,7 @@ impl DiffDrive {
             wheelbase,
             radius: wheel_radius,
             inv_radius,
-            half_base: Q::from_bits(wheelbase.to_bits() >> 1),
+            half_base_over_radius,
             half_radius: Q::from_bits(wheel_radius.to_bits() >> 1),
             radius_over_base,
         })
@@ -82,24 +114,31 @@ impl DiffDrive {
         self.radius
     }
 
-    /// Wheel speeds `[left, right]` (rad/s) for a body twist; saturates at the Q16.16 range.
+    /// Wheel speeds `[left, right]` (rad/s) for a body twist, each rounded once to the nearest
+    /// Q16.16 value and clamped to the Q16.16 range.
     pub fn inverse(&self, t: Twist) -> [Speed; 2] {
-        let turn = t.omega.saturating_mul(self.half_base);
-        let left = t.v.saturating_sub(turn).saturating_mul(self.inv_radius);
-        let right = t.v.saturating_add(turn).saturating_mul(self.inv_radius);
-        [left, right]
+        let straight = wide(t.v, self.inv_radius);
+        let turn = wide(t.omega, self.half_base_over_radius);
+        [
+            round_q(straight.saturating_sub(turn)),
+            round_q(straight.saturating_add(turn)),
+        ]
     }
 
-    /// Body twist from wheel speeds (rad/s); saturates at the Q16.16 range.
+    /// Body twist from wheel speeds (rad/s), each component rounded once to the nearest Q16.16
+    /// value and clamped to the Q16.16 range.
     pub fn forward(&self, left: Speed, right: Speed) -> Twist {
-        // (ωL + ωR)·r/2 computed as ωL·r/2 + ωR·r/2 so the sum cannot saturate first.
-        let v = left
-            .saturating_mul(self.half_radius)
-            .saturating_add(right.saturating_mul(self.half_radius));
-        let omega = right
-            .saturating_mul(self.radius_over_base)
-            .saturating_sub(left.saturating_mul(self.radius_over_base));
-        Twist { v, omega }
+        let (l, r) = (i64::from(left.to_bits()), i64::from(right.to_bits()));
+        let v = l
+            .saturating_add(r)
+            .saturating_mul(i64::from(self.half_radius.to_bits()));
+        let omega = r
+            .saturating_sub(l)
+            .saturating_mul(i64::from(self.radius_over_base.to_bits()));
+        Twist {
+            v: round_q(v),
+            omega: round_q(omega),
+        }
     }
 }
 
@@ -184,5 +223,82 @@ mod tests {
             DiffDrive::new(q(1000.0), q(0.1)),
             Err(KinematicsError::Wheelbase)
         );
+        assert!(DiffDrive::new(q(64.0), q(0.001)).is_ok());
+        assert_eq!(
+            DiffDrive::new(q(64.001), q(0.1)),
+            Err(KinematicsError::Wheelbase)
+        );
+    }
+
+    /// The extreme geometries with the extreme inputs: every result is the rounded exact value with
+    /// the precomputed ratios, or the clamp on the exact value's side, so nothing saturated on the
+    /// way (the bounds argued at `DiffDrive::new`).
+    #[test]
+    fn extreme_corners_round_or_clamp_to_the_exact_side() {
+        let edges = [Q::MIN, Q::from_bits(-1), Q::ZERO, Q::DELTA, Q::MAX];
+        let check = |got: Q, want: f64| {
+            if want >= 32768.0 {
+                assert_eq!(got, Q::MAX, "{want}");
+            } else if want < -32768.0 {
+                assert_eq!(got, Q::MIN, "{want}");
+            } else {
+                assert!(
+                    (got.to_num::<f64>() - want).abs() <= 1.0 / 65536.0,
+                    "{got} {want}"
+                );
+            }
+        };
+        for (base, radius) in [(64.0, 0.001), (0.01, 10.0), (0.01, 0.001), (64.0, 10.0)] {
+            let k = DiffDrive::new(q(base), q(radius)).unwrap();
+            let f = |x: Q| x.to_num::<f64>();
+            for a in edges {
+                for b in edges {
+                    let [l, r] = k.inverse(Twist { v: a, omega: b });
+                    check(
+                        l,
+                        f(a) * f(k.inv_radius) - f(b) * f(k.half_base_over_radius),
+                    );
+                    check(
+                        r,
+                        f(a) * f(k.inv_radius) + f(b) * f(k.half_base_over_radius),
+                    );
+                    let t = k.forward(a, b);
+                    check(t.v, (f(a) + f(b)) * f(k.half_radius));
+                    check(t.omega, (f(b) - f(a)) * f(k.radius_over_base));
+                }
+            }
+        }
+    }
+
+    /// One rounding per output: against the exact real-number formula with the precomputed ratios,
+    /// the error is at most half a Q16.16 step; against the true geometry it adds the ratios' own
+    /// rounding (≤ 2⁻¹⁷ each) times the input.
+    #[test]
+    fn rounds_once_to_nearest() {
+        let k = DiffDrive::new(q(0.42), q(0.075)).unwrap();
+        let ratio = |x: Q| x.to_num::<f64>();
+        let mut seed = 0x1234_5678_9abc_def0_u64;
+        let mut next = || {
+            seed ^= seed << 13;
+            seed ^= seed >> 7;
+            seed ^= seed << 17;
+            Q::from_bits((seed >> 40) as i32 - (1 << 23)) // ±128
+        };
+        let step = 1.0 / 65536.0;
+        for _ in 0..100_000 {
+            let (v, w) = (next(), next());
+            let [l, r] = k.inverse(Twist { v, omega: w });
+            let want_l = v.to_num::<f64>() * ratio(k.inv_radius)
+                - w.to_num::<f64>() * ratio(k.half_base_over_radius);
+            let want_r = v.to_num::<f64>() * ratio(k.inv_radius)
+                + w.to_num::<f64>() * ratio(k.half_base_over_radius);
+            assert!((l.to_num::<f64>() - want_l).abs() <= step / 2.0, "{v} {w}");
+            assert!((r.to_num::<f64>() - want_r).abs() <= step / 2.0, "{v} {w}");
+            let t = k.forward(v, w);
+            let want_v = (v.to_num::<f64>() + w.to_num::<f64>()) * ratio(k.half_radius);
+            let want_w = (w.to_num::<f64>() - v.to_num::<f64>()) * ratio(k.radius_over_base);
+            assert!((t.v.to_num::<f64>() - want_v).abs() <= step / 2.0);
+            assert!((t.omega.to_num::<f64>() - want_w).abs() <= step / 2.0);
+        }
     }
 }
