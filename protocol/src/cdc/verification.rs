@@ -12,7 +12,17 @@ const MAX_INPUT: usize = if cfg!(kani) {
 };
 
 pub(crate) fn any_message(src: &mut impl Source) -> Message {
-    match src.below(7) {
+    let kind = src.below(KINDS);
+    any_message_of(src, kind)
+}
+
+/// How many message kinds seed 001 has.
+const KINDS: u8 = 7;
+
+/// Any message of kind `kind` (0 ..= 6 in the order SET_MOTOR_PWM, MOTOR_ENABLE, ESTOP, PING, ACK,
+/// IMU, STATUS; anything above is STATUS).
+fn any_message_of(src: &mut impl Source, kind: u8) -> Message {
+    match kind {
         0 => Message::SetMotorPwm(SetMotorPwm {
             pwm: [
                 src.u16() as i16,
@@ -153,21 +163,32 @@ pub(crate) fn check_stream_total(src: &mut impl Source) {
 
 /// encode → decode_frame, and encode → stream, give back the same message.
 pub(crate) fn check_round_trip(src: &mut impl Source) {
-    let m = any_message(src);
+    let kind = src.below(KINDS);
+    let m = check_round_trip_of(src, kind);
+    cover!(src, matches!(m, Message::Imu(_)), "imu");
+    cover!(src, matches!(m, Message::SetMotorPwm(_)), "pwm");
+}
+
+/// [`check_round_trip`] for one message kind (under Kani one harness per kind: with the kind
+/// symbolic every field sits at a symbolic offset). Returns the message sent.
+pub(crate) fn check_round_trip_of(src: &mut impl Source, kind: u8) -> Message {
+    let m = any_message_of(src, kind);
     let mut buf = [0u8; MAX_FRAME_LEN];
     let n = m.encode(&mut buf);
     assert_eq!(n, HEADER_LEN + m.id().payload_len() + CRC_LEN);
     assert_eq!(decode_frame(&buf[..n]), Ok(m));
     let mut dec = StreamDecoder::new();
     let mut got = None;
-    for &b in &buf[..n] {
+    for (i, &b) in buf[..n].iter().enumerate() {
         if let Some(r) = dec.push(b) {
+            // Delivered at the frame's last byte, not before.
+            assert_eq!(i + 1, n);
             got = Some(r);
         }
     }
     assert_eq!(got, Some(Ok(m)));
-    cover!(src, matches!(m, Message::Imu(_)), "imu");
-    cover!(src, matches!(m, Message::SetMotorPwm(_)), "pwm");
+    cover!(src, buf[n - 2..n] != [0, 0], "frame with a non-zero CRC");
+    m
 }
 
 /// Flipping any one bit of a frame makes `decode_frame` refuse it.
@@ -211,6 +232,34 @@ mod proofs {
         check_round_trip(&mut KaniSource);
     }
 
+    /// One round-trip harness per message kind, the CRC replaced by the uninterpreted-function
+    /// model (`crc16::verification::model`): the property needs only that sender and receiver
+    /// compute the same checksum over the same bytes. Pending too: the IMU one did not finish in
+    /// 400 s (`RUSTFLAGS="--cfg kani_pending" cargo kani -p protocol -Z stubbing --harness
+    /// verify_round_trip_imu`); with a fixed XOR-fold in place of the model it verified in 24 s.
+    macro_rules! round_trip_of {
+        ($($name:ident => $kind:literal),+) => {$(
+            #[cfg_attr(kani_pending, kani::proof)]
+            #[cfg_attr(kani_pending, kani::unwind(30))]
+            #[cfg_attr(
+                kani_pending,
+                kani::stub(crate::crc16::checksum, crate::crc16::verification::model::checksum)
+            )]
+            fn $name() {
+                let _ = check_round_trip_of(&mut KaniSource, $kind);
+            }
+        )+};
+    }
+    round_trip_of!(
+        verify_round_trip_set_motor_pwm => 0,
+        verify_round_trip_motor_enable => 1,
+        verify_round_trip_estop => 2,
+        verify_round_trip_ping => 3,
+        verify_round_trip_ack => 4,
+        verify_round_trip_imu => 5,
+        verify_round_trip_status => 6
+    );
+
     #[cfg_attr(kani_pending, kani::proof)]
     #[cfg_attr(kani_pending, kani::unwind(30))]
     fn verify_bit_flip_detected() {
@@ -235,7 +284,17 @@ mod twins {
 
     #[test]
     fn round_trip() {
-        Twin::run(0xC0_0003, 20_000, check_round_trip).assert_covered(2);
+        Twin::run(0xC0_0003, 20_000, check_round_trip).assert_covered(3);
+    }
+
+    #[test]
+    fn round_trip_of_every_kind() {
+        for kind in 0..KINDS {
+            Twin::run(0xC0_0010 + u64::from(kind), 5_000, |src| {
+                let _ = check_round_trip_of(src, kind);
+            })
+            .assert_covered(1);
+        }
     }
 
     #[test]
