@@ -86,27 +86,8 @@ impl<S: ByteStream> CdcLink<S> {
     ) -> Result<Reply<cdc::Message>, LinkError> {
         let t0 = Instant::now();
         self.send(msg)?;
-        let mut other = Vec::new();
-        loop {
-            let mut got = self.poll()?.into_iter();
-            while let Some(m) = got.next() {
-                if is_reply(&m) {
-                    other.extend(got);
-                    return Ok(Reply {
-                        reply: m,
-                        round_trip: t0.elapsed(),
-                        other,
-                    });
-                }
-                other.push(m);
-            }
-            if t0.elapsed() >= timeout {
-                return Err(LinkError::NoReply(
-                    self.stream.name().to_string(),
-                    expected.to_string(),
-                ));
-            }
-        }
+        await_reply(t0, timeout, || self.poll(), is_reply)?
+            .ok_or_else(|| LinkError::NoReply(self.stream.name().to_string(), expected.to_string()))
     }
 
     /// PING; the reply is an ACK of 0x10 or a STATUS.
@@ -208,27 +189,41 @@ impl<S: ByteStream, const N: usize> TeensyLink<S, N> {
     ) -> Result<Reply<teensy::CmdMsg<N>>, LinkError> {
         let t0 = Instant::now();
         self.send(msg)?;
-        let mut other = Vec::new();
         let echo_of = |m: &teensy::CmdMsg<N>| m.reply(true) == msg.reply(true);
-        loop {
-            let mut got = self.poll()?.into_iter();
-            while let Some(m) = got.next() {
-                if echo_of(&m) {
-                    other.extend(got);
-                    return Ok(Reply {
-                        reply: m,
-                        round_trip: t0.elapsed(),
-                        other,
-                    });
-                }
-                other.push(m);
+        await_reply(t0, timeout, || self.poll(), echo_of)?.ok_or_else(|| {
+            LinkError::NoReply(
+                self.stream.name().to_string(),
+                "echo of the command".to_string(),
+            )
+        })
+    }
+}
+
+/// Polls until a message satisfying `is_reply` arrives (`Some`) or `timeout` has passed since the
+/// request went out at `t0` (`None`). Messages before the reply, and after it in the same read, are
+/// kept in [`Reply::other`] in order.
+fn await_reply<M>(
+    t0: Instant,
+    timeout: Duration,
+    mut poll: impl FnMut() -> Result<Vec<M>, LinkError>,
+    is_reply: impl Fn(&M) -> bool,
+) -> Result<Option<Reply<M>>, LinkError> {
+    let mut other = Vec::new();
+    loop {
+        let mut got = poll()?.into_iter();
+        while let Some(m) = got.next() {
+            if is_reply(&m) {
+                other.extend(got);
+                return Ok(Some(Reply {
+                    reply: m,
+                    round_trip: t0.elapsed(),
+                    other,
+                }));
             }
-            if t0.elapsed() >= timeout {
-                return Err(LinkError::NoReply(
-                    self.stream.name().to_string(),
-                    "echo of the command".to_string(),
-                ));
-            }
+            other.push(m);
+        }
+        if t0.elapsed() >= timeout {
+            return Ok(None);
         }
     }
 }
