@@ -130,7 +130,7 @@ const GEOMETRIES: [(Q, Q); 6] = [
 pub fn kinematics_total(src: &mut impl Source) {
     for &(base, radius) in &GEOMETRIES {
         let Ok(k) = DiffDrive::new(base, radius) else {
-            panic!("a real geometry was refused");
+            panic!("a listed geometry was refused");
         };
         let t = Twist {
             v: q(src),
