@@ -388,9 +388,7 @@ impl Message {
         let mut w = le::Writer::new(out);
         match self {
             Self::SetMotorPwm(p) => {
-                for v in p.pwm {
-                    w.i16(v);
-                }
+                w.i16s(&p.pwm);
                 w.u16(p.timeout_ms);
             }
             Self::MotorEnable(on) => w.u8(u8::from(*on)),
@@ -403,9 +401,8 @@ impl Message {
             }
             Self::Imu(i) => {
                 w.u32(i.t_ms);
-                for v in i.accel_mg.into_iter().chain(i.gyro_mdps) {
-                    w.i16(v);
-                }
+                w.i16s(&i.accel_mg);
+                w.i16s(&i.gyro_mdps);
                 w.i16(i.temp_cdeg);
                 w.u16(0); // reserved
             }

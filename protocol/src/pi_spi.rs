@@ -457,13 +457,10 @@ pub fn encode_tx(tx: &TxBuffer, out: &mut [u8; TX_LEN]) {
     let mut w = le::Writer::new(out);
     w.u8(TRANSFER_VERSION);
     w.u32(tx.update_time);
-    for v in tx.motor.bemf.iter().chain(&tx.motor.position) {
-        w.i32(*v);
-    }
+    w.i32s(&tx.motor.bemf);
+    w.i32s(&tx.motor.position);
     w.u8(tx.motor.done);
-    for v in tx.analog_sensor {
-        w.i16(v);
-    }
+    w.i16s(&tx.analog_sensor);
     w.i16(tx.battery_voltage);
     w.u16(tx.digital_sensors);
     let imu = &tx.imu;
@@ -480,9 +477,7 @@ pub fn encode_tx(tx: &TxBuffer, out: &mut [u8; TX_LEN]) {
     w.f32(imu.heading);
     w.f32(imu.temperature);
     let o = &tx.odometry;
-    for v in [o.pos_x, o.pos_y, o.heading, o.vx, o.vy, o.wz] {
-        w.f32(v);
-    }
+    w.f32s(&[o.pos_x, o.pos_y, o.heading, o.vx, o.vy, o.wz]);
 }
 
 /// Reads a `TxBuffer`; only the version can be wrong ([`RejectReason::Version`]).
@@ -554,21 +549,13 @@ pub fn encode_rx(rx: &RxBuffer, out: &mut [u8; RX_LEN]) {
     w.u32(updates_word(rx.updates));
     w.u8(rx.system_shutdown.to_byte());
     w.u16(pack_motor_modes(rx.motor_control_mode));
-    for v in rx.motor_target.iter().chain(&rx.motor_goal_position) {
-        w.i32(*v);
-    }
+    w.i32s(&rx.motor_target);
+    w.i32s(&rx.motor_goal_position);
     w.u8(pack_servo_modes(rx.servo_mode));
-    for v in rx.servo_pos {
-        w.u16(v);
-    }
+    w.u16s(&rx.servo_pos);
     rx.motor_pid_settings.write(&mut w);
-    for v in rx
-        .imu_gyro_orientation
-        .iter()
-        .chain(&rx.imu_compass_orientation)
-    {
-        w.i8(*v);
-    }
+    w.i8s(&rx.imu_gyro_orientation);
+    w.i8s(&rx.imu_compass_orientation);
     rx.kinematics.write(&mut w);
 }
 

@@ -117,9 +117,7 @@ impl Packed for SensorData {
 impl Packed for QuaternionData {
     const LEN: usize = 16;
     fn write(&self, w: &mut le::Writer<'_>) {
-        for v in [self.w, self.x, self.y, self.z] {
-            w.f32(v);
-        }
+        w.f32s(&[self.w, self.x, self.y, self.z]);
     }
     fn read(r: &mut le::Reader<'_>) -> Result<Self, le::Short> {
         Ok(Self {
@@ -134,9 +132,9 @@ impl Packed for QuaternionData {
 impl Packed for MotorPidSettings {
     const LEN: usize = 48;
     fn write(&self, w: &mut le::Writer<'_>) {
-        for v in self.kp.iter().chain(&self.ki).chain(&self.kd) {
-            w.f32(*v);
-        }
+        w.f32s(&self.kp);
+        w.f32s(&self.ki);
+        w.f32s(&self.kd);
     }
     fn read(r: &mut le::Reader<'_>) -> Result<Self, le::Short> {
         Ok(Self {
@@ -150,9 +148,10 @@ impl Packed for MotorPidSettings {
 impl Packed for KinematicsConfig {
     const LEN: usize = 64;
     fn write(&self, w: &mut le::Writer<'_>) {
-        for v in self.inverse.iter().flatten().chain(&self.ticks_to_rad) {
-            w.f32(*v);
+        for row in &self.inverse {
+            w.f32s(row);
         }
+        w.f32s(&self.ticks_to_rad);
     }
     fn read(r: &mut le::Reader<'_>) -> Result<Self, le::Short> {
         Ok(Self {
