@@ -556,39 +556,55 @@ impl StreamDecoder {
     }
 
     /// Returns the next result from bytes already buffered, without new input.
+    ///
+    /// Terminates: every [`Scan::Again`] step has dropped one buffered byte.
     pub fn poll(&mut self) -> Option<Result<Message, Error>> {
         loop {
-            match (self.buf.first(), self.buf.get(1)) {
-                (None, _) | (Some(0xAA), None) => return None,
-                (Some(0xAA), Some(0x55)) => {}
-                _ => {
-                    self.drop_front(1);
-                    self.count_dropped(1);
-                    continue;
-                }
+            if let Scan::Done(r) = self.poll_step() {
+                return r;
             }
-            let len = usize::from(*self.buf.get(3)?);
-            let need = HEADER_LEN.saturating_add(len).saturating_add(CRC_LEN);
-            let frame = self.buf.get(..need)?;
-            let result = decode_frame(frame);
-            match result {
-                Ok(_) => {
-                    self.stats.frames = self.stats.frames.saturating_add(1);
-                    self.drop_front(need);
-                }
-                Err(Error::Crc) => {
-                    // Maybe a false SOF: rescan from the next byte.
-                    self.stats.crc_errors = self.stats.crc_errors.saturating_add(1);
-                    self.drop_front(1);
-                    self.count_dropped(1);
-                }
-                Err(_) => {
-                    self.stats.message_errors = self.stats.message_errors.saturating_add(1);
-                    self.drop_front(need);
-                }
-            }
-            return Some(result);
         }
+    }
+
+    /// One step of [`poll`](Self::poll): drop one byte that cannot start a frame
+    /// ([`Scan::Again`]), or finish with a result or with "need more bytes".
+    fn poll_step(&mut self) -> Scan {
+        match (self.buf.first(), self.buf.get(1)) {
+            (None, _) | (Some(0xAA), None) => return Scan::Done(None),
+            (Some(0xAA), Some(0x55)) => {}
+            _ => {
+                self.drop_front(1);
+                self.count_dropped(1);
+                return Scan::Again;
+            }
+        }
+        let Some(&len) = self.buf.get(3) else {
+            return Scan::Done(None);
+        };
+        let need = HEADER_LEN
+            .saturating_add(usize::from(len))
+            .saturating_add(CRC_LEN);
+        let Some(frame) = self.buf.get(..need) else {
+            return Scan::Done(None);
+        };
+        let result = decode_frame(frame);
+        match result {
+            Ok(_) => {
+                self.stats.frames = self.stats.frames.saturating_add(1);
+                self.drop_front(need);
+            }
+            Err(Error::Crc) => {
+                // Maybe a false SOF: rescan from the next byte.
+                self.stats.crc_errors = self.stats.crc_errors.saturating_add(1);
+                self.drop_front(1);
+                self.count_dropped(1);
+            }
+            Err(_) => {
+                self.stats.message_errors = self.stats.message_errors.saturating_add(1);
+                self.drop_front(need);
+            }
+        }
+        Scan::Done(Some(result))
     }
 
     /// Feeds a slice and iterates over every result it completes (buffered frames included).
@@ -617,6 +633,14 @@ impl StreamDecoder {
         let n = u32::try_from(n).unwrap_or(u32::MAX);
         self.stats.dropped_bytes = self.stats.dropped_bytes.saturating_add(n);
     }
+}
+
+/// Outcome of one [`StreamDecoder::poll_step`].
+enum Scan {
+    /// One byte dropped; scan again.
+    Again,
+    /// `poll`'s answer.
+    Done(Option<Result<Message, Error>>),
 }
 
 /// Iterator returned by [`StreamDecoder::feed`].

@@ -244,6 +244,77 @@ pub(crate) fn check_open_total(src: &mut impl Source) {
     );
 }
 
+/// The shape half of [`check_open_total`], for the Kani harness that replaces the CRC by any
+/// value (`crc16::verification::model::any_checksum`): for every 64-byte input and whatever the
+/// CRC says, `open` returns a payload of exactly `LEN` ≤ [`MAX_PAYLOAD`] bytes, or `Crc` or
+/// `Framing`, and never panics. The twin of [`check_open_total`] checks the CRC half with the
+/// real CRC; `crc16::verify_checksum_total` proves the real CRC returns for every input.
+pub(crate) fn check_open_shape(src: &mut impl Source) {
+    let mut f: [u8; FRAME_LEN] = src.bytes();
+    if src.bool() {
+        // Well formed (the twin would not draw one at random): zero padding, length, CRC sealed.
+        let len = usize::from(src.below(MAX_PAYLOAD as u8 + 1));
+        f[PAYLOAD_OFFSET + len..CRC_OFFSET].fill(0);
+        seal(&mut f, len);
+        if src.bool() {
+            // Any length byte, CRC made good again: too long, or padding that is not zero.
+            f[LEN_OFFSET] = src.u8();
+            let crc = crc16::checksum(&f[..CRC_OFFSET]);
+            f[CRC_OFFSET..].copy_from_slice(&crc.to_be_bytes());
+        }
+    }
+    let r = open(&f);
+    match r {
+        Ok(p) => {
+            assert_eq!(p.len(), usize::from(f[LEN_OFFSET]));
+            assert!(p.len() <= MAX_PAYLOAD);
+        }
+        Err(RejectReason::Crc | RejectReason::Framing) => {}
+        Err(_) => panic!("open refused for a reason it does not check"),
+    }
+    cover!(src, r.is_ok(), "frame opened");
+    cover!(src, r == Err(RejectReason::Crc), "crc refused");
+    cover!(
+        src,
+        r == Err(RejectReason::Framing),
+        "length or padding refused"
+    );
+}
+
+/// Flipping any one of the 512 bits of the frame `f` (sealed: CRC good) makes `open`, and so both
+/// decoders, refuse it as `Crc`: every bit before the CRC is covered by it, and the CRC is stored
+/// big-endian, so a flip anywhere is a one-bit error pattern of the 64-byte codeword. Whether a
+/// pattern is caught does not depend on the frame's content (the checksum is affine, see
+/// `crc16::verification`), so checking one frame for every bit checks every frame.
+pub(crate) fn check_bit_flip_refused_by_open(src: &mut impl Source, f: &[u8; FRAME_LEN]) {
+    let bit = usize::from(src.u16() % (FRAME_LEN as u16 * 8));
+    let mut g = *f;
+    g[bit / 8] ^= 1 << (bit % 8);
+    assert_eq!(open(&g).map(|_| ()), Err(RejectReason::Crc));
+    cover!(src, bit / 8 == LEN_OFFSET, "flip in length");
+    cover!(src, bit / 8 >= CRC_OFFSET, "flip in crc");
+    cover!(
+        src,
+        bit / 8 == CRC_OFFSET - 1,
+        "flip in the last padding byte"
+    );
+}
+
+/// A sealed command frame with every field set (the bit-flip harness's frame).
+pub(crate) fn sample_command_frame() -> [u8; FRAME_LEN] {
+    let cmd = MotorCommand {
+        timestamp_us: 0x1234_5678,
+        left_speed_cmd: 1.25,
+        right_speed_cmd: -0.5,
+        control_mode: 1,
+        enable: true,
+        seq: 0xDEAD_BEEF,
+    };
+    let mut f = [0u8; FRAME_LEN];
+    encode_command(&cmd, &mut f);
+    f
+}
+
 /// Any payload of up to [`MAX_PAYLOAD`] bytes, and a reader over it (a reader part-way through a
 /// payload is a reader over the bytes still to read, so this is every reader state).
 fn any_payload(src: &mut impl Source) -> ([u8; MAX_PAYLOAD], usize) {
@@ -330,6 +401,22 @@ mod proofs {
     }
 
     #[kani::proof]
+    #[kani::unwind(20)]
+    #[kani::stub(
+        crate::crc16::checksum,
+        crate::crc16::verification::model::any_checksum
+    )]
+    fn verify_open_shape() {
+        check_open_shape(&mut KaniSource);
+    }
+
+    #[kani::proof]
+    #[kani::unwind(20)]
+    fn verify_bit_flip_refused_by_open() {
+        check_bit_flip_refused_by_open(&mut KaniSource, &sample_command_frame());
+    }
+
+    #[kani::proof]
     #[kani::unwind(11)]
     fn verify_command_field_step() {
         check_command_field_step(&mut KaniSource);
@@ -388,6 +475,30 @@ mod twins {
     #[test]
     fn open_total() {
         Twin::run(0xA3_0007, CASES, check_open_total).assert_covered(4);
+    }
+
+    #[test]
+    fn open_shape() {
+        Twin::run(0xA3_000A, CASES, check_open_shape).assert_covered(3);
+    }
+
+    #[test]
+    fn bit_flip_refused_by_open() {
+        let mut t = Twin::new(0xA3_000B);
+        for _ in 0..200 {
+            let mut cmd = any_command(&mut t);
+            cmd.control_mode &= 0xFF;
+            let mut f = [0u8; FRAME_LEN];
+            encode_command(&cmd, &mut f);
+            Twin::run(u64::from(t.u32()), 2_000, |src| {
+                check_bit_flip_refused_by_open(src, &f)
+            })
+            .assert_covered(3);
+        }
+        Twin::run(0xA3_000C, 5_000, |src| {
+            check_bit_flip_refused_by_open(src, &sample_command_frame())
+        })
+        .assert_covered(3);
     }
 
     #[test]
