@@ -388,7 +388,7 @@ impl Message {
         let mut w = le::Writer::new(out);
         match self {
             Self::SetMotorPwm(p) => {
-                w.i16s(&p.pwm);
+                w.each(&p.pwm, le::Writer::i16);
                 w.u16(p.timeout_ms);
             }
             Self::MotorEnable(on) => w.u8(u8::from(*on)),
@@ -401,8 +401,8 @@ impl Message {
             }
             Self::Imu(i) => {
                 w.u32(i.t_ms);
-                w.i16s(&i.accel_mg);
-                w.i16s(&i.gyro_mdps);
+                w.each(&i.accel_mg, le::Writer::i16);
+                w.each(&i.gyro_mdps, le::Writer::i16);
                 w.i16(i.temp_cdeg);
                 w.u16(0); // reserved
             }

@@ -113,31 +113,12 @@ impl<'a> Writer<'a> {
         self.bytes(&v.to_le_bytes());
     }
 
-    // Field runs, one plain loop per array: a model checker unrolls each to its exact length (an
-    // iterator `chain` leaves it a merged state whose end it cannot see, so it unrolls to the bound).
-    pub(crate) fn i8s(&mut self, vs: &[i8]) {
+    /// Writes every element of `vs` with `put` (e.g. `w.each(&speeds, Writer::f32)`): one plain loop
+    /// per array, which a model checker unrolls to its exact length (an iterator `chain` leaves it a
+    /// merged state whose end it cannot see, so it unrolls to the harness bound).
+    pub(crate) fn each<T: Copy>(&mut self, vs: &[T], put: impl Fn(&mut Self, T)) {
         for &v in vs {
-            self.i8(v);
-        }
-    }
-    pub(crate) fn i16s(&mut self, vs: &[i16]) {
-        for &v in vs {
-            self.i16(v);
-        }
-    }
-    pub(crate) fn u16s(&mut self, vs: &[u16]) {
-        for &v in vs {
-            self.u16(v);
-        }
-    }
-    pub(crate) fn i32s(&mut self, vs: &[i32]) {
-        for &v in vs {
-            self.i32(v);
-        }
-    }
-    pub(crate) fn f32s(&mut self, vs: &[f32]) {
-        for &v in vs {
-            self.f32(v);
+            put(self, v);
         }
     }
 }

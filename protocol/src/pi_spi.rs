@@ -457,10 +457,10 @@ pub fn encode_tx(tx: &TxBuffer, out: &mut [u8; TX_LEN]) {
     let mut w = le::Writer::new(out);
     w.u8(TRANSFER_VERSION);
     w.u32(tx.update_time);
-    w.i32s(&tx.motor.bemf);
-    w.i32s(&tx.motor.position);
+    w.each(&tx.motor.bemf, le::Writer::i32);
+    w.each(&tx.motor.position, le::Writer::i32);
     w.u8(tx.motor.done);
-    w.i16s(&tx.analog_sensor);
+    w.each(&tx.analog_sensor, le::Writer::i16);
     w.i16(tx.battery_voltage);
     w.u16(tx.digital_sensors);
     let imu = &tx.imu;
@@ -477,7 +477,10 @@ pub fn encode_tx(tx: &TxBuffer, out: &mut [u8; TX_LEN]) {
     w.f32(imu.heading);
     w.f32(imu.temperature);
     let o = &tx.odometry;
-    w.f32s(&[o.pos_x, o.pos_y, o.heading, o.vx, o.vy, o.wz]);
+    w.each(
+        &[o.pos_x, o.pos_y, o.heading, o.vx, o.vy, o.wz],
+        le::Writer::f32,
+    );
 }
 
 /// Reads a `TxBuffer`; only the version can be wrong ([`RejectReason::Version`]).
@@ -549,13 +552,13 @@ pub fn encode_rx(rx: &RxBuffer, out: &mut [u8; RX_LEN]) {
     w.u32(updates_word(rx.updates));
     w.u8(rx.system_shutdown.to_byte());
     w.u16(pack_motor_modes(rx.motor_control_mode));
-    w.i32s(&rx.motor_target);
-    w.i32s(&rx.motor_goal_position);
+    w.each(&rx.motor_target, le::Writer::i32);
+    w.each(&rx.motor_goal_position, le::Writer::i32);
     w.u8(pack_servo_modes(rx.servo_mode));
-    w.u16s(&rx.servo_pos);
+    w.each(&rx.servo_pos, le::Writer::u16);
     rx.motor_pid_settings.write(&mut w);
-    w.i8s(&rx.imu_gyro_orientation);
-    w.i8s(&rx.imu_compass_orientation);
+    w.each(&rx.imu_gyro_orientation, le::Writer::i8);
+    w.each(&rx.imu_compass_orientation, le::Writer::i8);
     rx.kinematics.write(&mut w);
 }
 

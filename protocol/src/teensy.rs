@@ -160,7 +160,7 @@ impl<const N: usize> CmdMsg<N> {
         let mut w = le::Writer::new(out);
         w.i32(self.cmd_type as i32);
         w.i32(self.is_relative);
-        w.i32s(&self.mtr_angles);
+        w.each(&self.mtr_angles, le::Writer::i32);
         w.i32(self.mtr_speed_deg_s);
         w.i32(self.mtr_accel_deg_s_s);
         w.i32(self.cmd_success);

@@ -117,7 +117,7 @@ impl Packed for SensorData {
 impl Packed for QuaternionData {
     const LEN: usize = 16;
     fn write(&self, w: &mut le::Writer<'_>) {
-        w.f32s(&[self.w, self.x, self.y, self.z]);
+        w.each(&[self.w, self.x, self.y, self.z], le::Writer::f32);
     }
     fn read(r: &mut le::Reader<'_>) -> Result<Self, le::Short> {
         Ok(Self {
@@ -132,9 +132,9 @@ impl Packed for QuaternionData {
 impl Packed for MotorPidSettings {
     const LEN: usize = 48;
     fn write(&self, w: &mut le::Writer<'_>) {
-        w.f32s(&self.kp);
-        w.f32s(&self.ki);
-        w.f32s(&self.kd);
+        w.each(&self.kp, le::Writer::f32);
+        w.each(&self.ki, le::Writer::f32);
+        w.each(&self.kd, le::Writer::f32);
     }
     fn read(r: &mut le::Reader<'_>) -> Result<Self, le::Short> {
         Ok(Self {
@@ -149,9 +149,9 @@ impl Packed for KinematicsConfig {
     const LEN: usize = 64;
     fn write(&self, w: &mut le::Writer<'_>) {
         for row in &self.inverse {
-            w.f32s(row);
+            w.each(row, le::Writer::f32);
         }
-        w.f32s(&self.ticks_to_rad);
+        w.each(&self.ticks_to_rad, le::Writer::f32);
     }
     fn read(r: &mut le::Reader<'_>) -> Result<Self, le::Short> {
         Ok(Self {
