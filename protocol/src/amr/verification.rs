@@ -81,8 +81,8 @@ fn shaped_frame<S: Source>(
             encode_valid(src, &mut f);
             let i = usize::from(src.below(CRC_OFFSET as u8));
             f[i] = src.u8();
-            let crc = crc16::checksum(&f[..CRC_OFFSET]);
-            f[CRC_OFFSET..].copy_from_slice(&crc.to_be_bytes());
+            let stated = usize::from(f[LEN_OFFSET]);
+            seal(&mut f, stated);
         }
     }
     f
@@ -255,13 +255,13 @@ pub(crate) fn check_open_shape(src: &mut impl Source) {
         // Well formed (the twin would not draw one at random): zero padding, length, CRC sealed.
         let len = usize::from(src.below(MAX_PAYLOAD as u8 + 1));
         f[PAYLOAD_OFFSET + len..CRC_OFFSET].fill(0);
-        seal(&mut f, len);
-        if src.bool() {
-            // Any length byte, CRC made good again: too long, or padding that is not zero.
-            f[LEN_OFFSET] = src.u8();
-            let crc = crc16::checksum(&f[..CRC_OFFSET]);
-            f[CRC_OFFSET..].copy_from_slice(&crc.to_be_bytes());
-        }
+        // Or any length byte with the CRC made good: too long, or padding that is not zero.
+        let stated = if src.bool() {
+            usize::from(src.u8())
+        } else {
+            len
+        };
+        seal(&mut f, stated);
     }
     let r = open(&f);
     match r {
@@ -482,14 +482,20 @@ mod twins {
         Twin::run(0xA3_000A, CASES, check_open_shape).assert_covered(3);
     }
 
+    /// A valid command frame (mode within a byte) drawn by `t`.
+    fn valid_command_frame(t: &mut Twin) -> [u8; FRAME_LEN] {
+        let mut cmd = any_command(t);
+        cmd.control_mode &= 0xFF;
+        let mut f = [0u8; FRAME_LEN];
+        encode_command(&cmd, &mut f);
+        f
+    }
+
     #[test]
     fn bit_flip_refused_by_open() {
         let mut t = Twin::new(0xA3_000B);
         for _ in 0..200 {
-            let mut cmd = any_command(&mut t);
-            cmd.control_mode &= 0xFF;
-            let mut f = [0u8; FRAME_LEN];
-            encode_command(&cmd, &mut f);
+            let f = valid_command_frame(&mut t);
             Twin::run(u64::from(t.u32()), 2_000, |src| {
                 check_bit_flip_refused_by_open(src, &f)
             })
@@ -546,10 +552,7 @@ mod twins {
     fn every_single_bit_flip_of_sample_frames() {
         let mut t = Twin::new(7);
         for _ in 0..50 {
-            let mut cmd = any_command(&mut t);
-            cmd.control_mode &= 0xFF;
-            let mut f = [0u8; FRAME_LEN];
-            encode_command(&cmd, &mut f);
+            let f = valid_command_frame(&mut t);
             for bit in 0..FRAME_LEN * 8 {
                 let mut g = f;
                 g[bit / 8] ^= 1 << (bit % 8);
