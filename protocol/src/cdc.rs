@@ -510,17 +510,26 @@ pub struct Stats {
 ///  bytes:  .. 13 AA 55 01 0A [10 B] c c | AA 55 02 01 01 c c ..
 ///          └dropped┘└──── frame ───────┘ └───── frame ─────┘
 /// ```
-#[derive(Clone, Debug, Default)]
+#[derive(Clone, Debug)]
 pub struct StreamDecoder {
-    buf: heapless::Vec<u8, MAX_FRAME_LEN>,
+    /// The bytes held are `buf[..len]`; `len <= MAX_FRAME_LEN` always.
+    buf: [u8; MAX_FRAME_LEN],
+    len: usize,
     stats: Stats,
+}
+
+impl Default for StreamDecoder {
+    fn default() -> Self {
+        Self::new()
+    }
 }
 
 impl StreamDecoder {
     /// An empty decoder.
     pub const fn new() -> Self {
         Self {
-            buf: heapless::Vec::new(),
+            buf: [0; MAX_FRAME_LEN],
+            len: 0,
             stats: Stats {
                 frames: 0,
                 crc_errors: 0,
@@ -537,13 +546,18 @@ impl StreamDecoder {
 
     /// Bytes held, waiting for the rest of a frame (at most [`MAX_FRAME_LEN`]).
     pub fn buffered(&self) -> usize {
-        self.buf.len()
+        self.len
+    }
+
+    /// The bytes held.
+    fn held(&self) -> &[u8] {
+        self.buf.get(..self.len).unwrap_or(&self.buf)
     }
 
     /// Discards a partial frame (e.g. after an inter-byte timeout), counting its bytes as dropped.
     pub fn reset(&mut self) {
-        self.count_dropped(self.buf.len());
-        self.buf.clear();
+        self.count_dropped(self.len);
+        self.len = 0;
     }
 
     /// Adds one byte; returns a message or an error if one completed.
@@ -569,7 +583,8 @@ impl StreamDecoder {
     /// One step of [`poll`](Self::poll): drop one byte that cannot start a frame
     /// ([`Scan::Again`]), or finish with a result or with "need more bytes".
     fn poll_step(&mut self) -> Scan {
-        match (self.buf.first(), self.buf.get(1)) {
+        let held = self.held();
+        match (held.first(), held.get(1)) {
             (None, _) | (Some(0xAA), None) => return Scan::Done(None),
             (Some(0xAA), Some(0x55)) => {}
             _ => {
@@ -578,13 +593,13 @@ impl StreamDecoder {
                 return Scan::Again;
             }
         }
-        let Some(&len) = self.buf.get(3) else {
+        let Some(&len) = held.get(3) else {
             return Scan::Done(None);
         };
         let need = HEADER_LEN
             .saturating_add(usize::from(len))
             .saturating_add(CRC_LEN);
-        let Some(frame) = self.buf.get(..need) else {
+        let Some(frame) = held.get(..need) else {
             return Scan::Done(None);
         };
         let result = decode_frame(frame);
@@ -613,20 +628,24 @@ impl StreamDecoder {
     }
 
     fn append(&mut self, byte: u8) {
-        if self.buf.is_full() {
+        if self.len >= MAX_FRAME_LEN {
             // Unreachable while `poll` runs after every byte (a frame is complete at MAX_FRAME_LEN);
             // kept so that no call order can make the decoder fail.
             self.drop_front(1);
             self.count_dropped(1);
         }
-        let _ = self.buf.push(byte);
+        if let Some(slot) = self.buf.get_mut(self.len) {
+            *slot = byte;
+            self.len = self.len.saturating_add(1);
+        }
     }
 
+    /// Removes the first `n` bytes held (all of them if fewer).
     fn drop_front(&mut self, n: usize) {
-        let n = n.min(self.buf.len());
-        let keep = self.buf.len().saturating_sub(n);
-        self.buf.copy_within(n.., 0);
-        self.buf.truncate(keep);
+        let held = self.buf.get_mut(..self.len).unwrap_or(&mut []);
+        let n = n.min(held.len());
+        held.copy_within(n.., 0);
+        self.len = held.len().saturating_sub(n);
     }
 
     fn count_dropped(&mut self, n: usize) {
