@@ -32,6 +32,11 @@
 //! ([`CmdMsg::reply`]). Checks on receipt: COBS structure and length → [`RejectReason::Framing`],
 //! CRC → [`RejectReason::Crc`], version → [`RejectReason::Version`], `cmd_type` → [`RejectReason::Decode`].
 //!
+//! The body is shorter than 254 bytes for every motor count up to [`MAX_MOTORS`], so COBS encodes
+//! it as one block and every frame of `N` motors has the same length, [`CmdMsg::ROBUST_LEN`]. The
+//! crate `corncobs` encodes; the receiver checks that length first and undoes the one-block COBS
+//! at fixed positions (a Kani-proven decoder, cross-checked against corncobs' own in the tests).
+//!
 //! # Mapping onto the safety core
 //!
 //! `CMDTYPE_MTRS` carries motor angles (a position command): [`CmdMsg::to_event`] maps motors 0 and
@@ -64,13 +69,26 @@ pub const fn robust_body_len(n: usize) -> usize {
     msg_len(n).saturating_add(3)
 }
 
-/// Largest robust frame with `n` motors, COBS overhead and the 0x00 terminator included.
-pub const fn robust_max_len(n: usize) -> usize {
+/// Bytes of every robust frame with `n` motors, COBS code bytes and the 0x00 terminator included.
+///
+/// COBS adds one code byte per started run of 254 bytes, so a body shorter than 254 bytes (as it
+/// is up to [`MAX_MOTORS`], checked below) always encodes to exactly its length + 2: the largest
+/// encoding is the only one.
+pub const fn robust_len(n: usize) -> usize {
     corncobs::max_encoded_len(robust_body_len(n))
 }
 
+const _: () = assert!(
+    robust_body_len(MAX_MOTORS) < 254
+        && robust_len(MAX_MOTORS) == robust_body_len(MAX_MOTORS).saturating_add(2),
+    "robust frames must stay one COBS run long, so that their length is fixed"
+);
+
+/// Room for the body of a robust frame of any motor count.
+const ROBUST_BODY_BUF: usize = robust_body_len(MAX_MOTORS);
+
 /// The stream decoder's buffer: the largest robust frame of [`MAX_MOTORS`] motors.
-pub const ROBUST_BUF: usize = robust_max_len(MAX_MOTORS);
+pub const ROBUST_BUF: usize = robust_len(MAX_MOTORS);
 
 /// Command types (`enum CmdType`, 32-bit on the wire). Values fixed by the seed.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
@@ -145,8 +163,8 @@ impl<const N: usize> CmdMsg<N> {
     pub const LEN: usize = msg_len(N);
     /// `sizeof(Packet)`: the message and the `'\n'`.
     pub const LEGACY_LEN: usize = legacy_len(N);
-    /// Largest robust frame, terminator included.
-    pub const ROBUST_MAX_LEN: usize = robust_max_len(N);
+    /// Bytes of a robust frame, terminator included (every frame has this length, see [`robust_len`]).
+    pub const ROBUST_LEN: usize = robust_len(N);
     const FITS: () = assert!(N <= MAX_MOTORS, "more motors than MAX_MOTORS");
 
     /// The echo the Teensy sends back: the same command with `cmd_success` set.
@@ -207,10 +225,18 @@ impl<const N: usize> CmdMsg<N> {
     }
 
     /// Writes the robust frame (COBS, 0x00 terminator included); `None` if `out` is shorter than
-    /// [`Self::ROBUST_MAX_LEN`].
+    /// [`Self::ROBUST_LEN`].
     pub fn encode_robust(&self, out: &mut [u8]) -> Option<usize> {
+        let mut body = [0u8; ROBUST_BODY_BUF];
+        let n = self.encode_body(&mut body)?;
+        let out = out.get_mut(..Self::ROBUST_LEN)?;
+        Some(corncobs::encode_buf(body.get(..n)?, out))
+    }
+
+    /// Writes the robust frame's body before COBS (version, message, CRC); returns its length
+    /// ([`robust_body_len`]`(N)`).
+    pub(crate) fn encode_body(&self, body: &mut [u8; ROBUST_BODY_BUF]) -> Option<usize> {
         let () = Self::FITS;
-        let mut body = [0u8; robust_body_len(MAX_MOTORS)];
         let body = body.get_mut(..robust_body_len(N))?;
         let (version, rest) = body.split_first_mut()?;
         *version = ROBUST_VERSION;
@@ -218,28 +244,29 @@ impl<const N: usize> CmdMsg<N> {
         let covered = n.saturating_add(1);
         let crc = crc16::checksum(body.get(..covered)?);
         body.get_mut(covered..)?.copy_from_slice(&crc.to_le_bytes());
-        let out = out.get_mut(..Self::ROBUST_MAX_LEN)?;
-        Some(corncobs::encode_buf(body, out))
+        Some(body.len())
     }
 
     /// Reads one robust frame: COBS bytes ending with the 0x00 terminator and containing no other zero.
     pub fn decode_robust(frame: &[u8]) -> Result<Self, RejectReason> {
         let () = Self::FITS;
-        // corncobs needs an output as long as the input; frames longer than ours are not ours.
-        if frame.len() > ROBUST_BUF || frame.last() != Some(&0) {
-            return Err(RejectReason::Framing);
-        }
-        let zeros = frame.iter().filter(|&&b| b == 0).count();
-        if zeros != 1 {
+        // Every frame of ours has the same length (see `robust_len`); checked first, so that
+        // COBS only ever decodes that many bytes.
+        if frame.len() != Self::ROBUST_LEN || frame.last() != Some(&0) {
             return Err(RejectReason::Framing);
         }
         let mut body = [0u8; ROBUST_BUF];
-        let out = body.get_mut(..frame.len()).ok_or(RejectReason::Framing)?;
-        let n = corncobs::decode_buf(frame, out).map_err(|_| RejectReason::Framing)?;
+        let n = unstuff(frame, &mut body).ok_or(RejectReason::Framing)?;
+        Self::decode_body(body.get(..n).ok_or(RejectReason::Framing)?)
+    }
+
+    /// Reads a robust frame's body after COBS: length → `Framing`, CRC → `Crc`, version →
+    /// `Version`, then the message.
+    pub(crate) fn decode_body(body: &[u8]) -> Result<Self, RejectReason> {
+        let n = body.len();
         if n != robust_body_len(N) {
             return Err(RejectReason::Framing);
         }
-        let body = body.get(..n).ok_or(RejectReason::Framing)?;
         let (covered, crc) = body.split_at(n.saturating_sub(2));
         let stored = <[u8; 2]>::try_from(crc).map_err(|_| RejectReason::Framing)?;
         if crc16::checksum(covered) != u16::from_le_bytes(stored) {
@@ -265,6 +292,44 @@ impl<const N: usize> CmdMsg<N> {
             CmdType::Cal | CmdType::EndeffOn | CmdType::EndeffOff | CmdType::Config => None,
         }
     }
+}
+
+/// Undoes COBS for a frame of a single block (`code, data…, 0x00`, fewer than 254 data bytes, as
+/// every robust frame is): writes the body into `out` and returns its length (`frame.len() − 2`).
+///
+/// In such a frame every code byte stands where the body has a zero, so byte `p` of the frame
+/// (1 ≤ p ≤ len − 2) decodes to body byte `p − 1`: a zero where a code stands, the frame byte
+/// elsewhere. The first code is byte 0; each code `c` at `p` puts the next one at `p + c`, and the
+/// chain must end exactly on the terminator. `None` for anything else: no terminator, a zero
+/// before it, a chain that overshoots or stops short, 254 or more data bytes (which would need
+/// the 0xFF code), or `out` too short.
+///
+/// corncobs, which encodes these frames, also decodes them, but by copying each run with a
+/// length read from the frame; this byte-by-byte form reads and writes only at fixed positions,
+/// which is what lets Kani prove the decoder total over every input. The tests check that both
+/// decoders agree.
+pub(crate) fn unstuff(frame: &[u8], out: &mut [u8]) -> Option<usize> {
+    let (&first, rest) = frame.split_first()?;
+    let (&0, data) = rest.split_last()? else {
+        return None;
+    };
+    if data.len() >= 254 || out.len() < data.len() {
+        return None;
+    }
+    let mut next = usize::from(first);
+    for (i, (o, &d)) in out.iter_mut().zip(data).enumerate() {
+        if d == 0 {
+            return None;
+        }
+        let p = i.saturating_add(1);
+        if p == next {
+            *o = 0;
+            next = p.saturating_add(usize::from(d));
+        } else {
+            *o = d;
+        }
+    }
+    (next == data.len().saturating_add(1)).then_some(data.len())
 }
 
 /// What a [`RobustDecoder`] has seen (saturating counters).
@@ -321,7 +386,7 @@ impl<const N: usize> RobustDecoder<N> {
     /// Adds one byte; at a 0x00 returns the frame's command or error (empty frames are ignored).
     pub fn push(&mut self, byte: u8) -> Option<Result<CmdMsg<N>, RejectReason>> {
         if byte != 0 {
-            if self.buf.len() >= CmdMsg::<N>::ROBUST_MAX_LEN.saturating_sub(1)
+            if self.buf.len() >= CmdMsg::<N>::ROBUST_LEN.saturating_sub(1)
                 || self.buf.push(byte).is_err()
             {
                 self.overflow = true;

@@ -38,8 +38,11 @@ fn legacy_layout_is_the_c_union() {
 
 #[test]
 fn robust_frame_round_trip_and_errors() {
-    let mut f = [0u8; Msg::ROBUST_MAX_LEN];
+    let mut f = [0u8; Msg::ROBUST_LEN];
     let n = sample().encode_robust(&mut f).unwrap();
+    // Version 1 + CmdMsg 36 + CRC 2, then one COBS code byte and the terminator.
+    assert_eq!(n, 41);
+    assert_eq!(Msg::ROBUST_LEN, 41);
     assert_eq!(f[n - 1], 0);
     assert!(f[..n - 1].iter().all(|&b| b != 0));
     assert_eq!(Msg::decode_robust(&f[..n]), Ok(sample()));
@@ -58,7 +61,7 @@ fn robust_frame_round_trip_and_errors() {
 #[test]
 fn echo_carries_cmd_success() {
     let mut dec = RobustDecoder::<4>::new();
-    let mut f = [0u8; Msg::ROBUST_MAX_LEN];
+    let mut f = [0u8; Msg::ROBUST_LEN];
     let n = sample().reply(true).encode_robust(&mut f).unwrap();
     let mut got = None;
     for &b in [0u8, 0x13, 0x37, 0x00].iter().chain(&f[..n]) {
@@ -79,7 +82,7 @@ fn decoder_survives_an_endless_frame() {
         assert_eq!(dec.push(0x55), None);
     }
     assert_eq!(dec.push(0), Some(Err(RejectReason::Framing)));
-    let mut f = [0u8; Msg::ROBUST_MAX_LEN];
+    let mut f = [0u8; Msg::ROBUST_LEN];
     let n = sample().encode_robust(&mut f).unwrap();
     let results: std::vec::Vec<_> = f[..n].iter().filter_map(|&b| dec.push(b)).collect();
     assert_eq!(results, [Ok(sample())]);
