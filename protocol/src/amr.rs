@@ -90,6 +90,16 @@ pub mod command_field {
     pub const SEQ: u32 = 7;
     /// `uint32 protocol_version`.
     pub const PROTOCOL_VERSION: u32 = 8;
+    /// Every field, in the order the encoder writes them.
+    pub const ALL: [u32; 7] = [
+        TIMESTAMP_US,
+        LEFT_SPEED_CMD,
+        RIGHT_SPEED_CMD,
+        CONTROL_MODE,
+        ENABLE,
+        SEQ,
+        PROTOCOL_VERSION,
+    ];
 }
 
 /// Field numbers of `MotorFeedback` (they must match `proto/amr.proto`; a test checks).
@@ -118,6 +128,21 @@ pub mod feedback_field {
     pub const CMD_SEQ: u32 = 12;
     /// `uint32 protocol_version`.
     pub const PROTOCOL_VERSION: u32 = 13;
+    /// Every field, in the order the encoder writes them.
+    pub const ALL: [u32; 12] = [
+        TIMESTAMP_US,
+        LEFT_SPEED,
+        RIGHT_SPEED,
+        LEFT_CURRENT,
+        RIGHT_CURRENT,
+        LEFT_ENCODER,
+        RIGHT_ENCODER,
+        FAULT_FLAGS,
+        SEQ,
+        MODE,
+        CMD_SEQ,
+        PROTOCOL_VERSION,
+    ];
 }
 
 /// Largest `MotorCommand` payload this encoder writes (every field at its longest).
@@ -315,15 +340,28 @@ pub fn encode_command(cmd: &MotorCommand, out: &mut [u8; FRAME_LEN]) {
     seal(out, len);
 }
 
+/// The payload is the fields of [`command_field::ALL`], one after the other, each as
+/// [`write_command_field`] writes it (the round-trip proof reads it that way).
 fn write_command(w: &mut Writer<'_>, cmd: &MotorCommand) {
+    for field in command_field::ALL {
+        write_command_field(w, cmd, field);
+    }
+}
+
+/// One field of `cmd` (nothing if it holds its default value; unknown numbers write nothing).
+#[inline(always)]
+fn write_command_field(w: &mut Writer<'_>, cmd: &MotorCommand, field: u32) {
     use command_field as f;
-    w.fixed32(f::TIMESTAMP_US, cmd.timestamp_us);
-    w.float(f::LEFT_SPEED_CMD, cmd.left_speed_cmd);
-    w.float(f::RIGHT_SPEED_CMD, cmd.right_speed_cmd);
-    w.uint32(f::CONTROL_MODE, cmd.control_mode);
-    w.uint32(f::ENABLE, u32::from(cmd.enable));
-    w.fixed32(f::SEQ, cmd.seq);
-    w.uint32(f::PROTOCOL_VERSION, PROTOCOL_VERSION);
+    match field {
+        f::TIMESTAMP_US => w.fixed32(field, cmd.timestamp_us),
+        f::LEFT_SPEED_CMD => w.float(field, cmd.left_speed_cmd),
+        f::RIGHT_SPEED_CMD => w.float(field, cmd.right_speed_cmd),
+        f::CONTROL_MODE => w.uint32(field, cmd.control_mode),
+        f::ENABLE => w.uint32(field, u32::from(cmd.enable)),
+        f::SEQ => w.fixed32(field, cmd.seq),
+        f::PROTOCOL_VERSION => w.uint32(field, PROTOCOL_VERSION),
+        _ => {}
+    }
 }
 
 /// Encodes `fb` into a complete frame; `protocol_version` is written as [`PROTOCOL_VERSION`].
@@ -337,20 +375,33 @@ pub fn encode_feedback(fb: &MotorFeedback, out: &mut [u8; FRAME_LEN]) {
     seal(out, len);
 }
 
+/// The payload is the fields of [`feedback_field::ALL`], one after the other, each as
+/// [`write_feedback_field`] writes it.
 fn write_feedback(w: &mut Writer<'_>, fb: &MotorFeedback) {
+    for field in feedback_field::ALL {
+        write_feedback_field(w, fb, field);
+    }
+}
+
+/// One field of `fb` (nothing if it holds its default value; unknown numbers write nothing).
+#[inline(always)]
+fn write_feedback_field(w: &mut Writer<'_>, fb: &MotorFeedback, field: u32) {
     use feedback_field as f;
-    w.fixed32(f::TIMESTAMP_US, fb.timestamp_us);
-    w.float(f::LEFT_SPEED, fb.left_speed);
-    w.float(f::RIGHT_SPEED, fb.right_speed);
-    w.float(f::LEFT_CURRENT, fb.left_current);
-    w.float(f::RIGHT_CURRENT, fb.right_current);
-    w.sint32(f::LEFT_ENCODER, fb.left_encoder);
-    w.sint32(f::RIGHT_ENCODER, fb.right_encoder);
-    w.uint32(f::FAULT_FLAGS, fb.fault_flags);
-    w.fixed32(f::SEQ, fb.seq);
-    w.uint32(f::MODE, fb.mode);
-    w.fixed32(f::CMD_SEQ, fb.cmd_seq);
-    w.uint32(f::PROTOCOL_VERSION, PROTOCOL_VERSION);
+    match field {
+        f::TIMESTAMP_US => w.fixed32(field, fb.timestamp_us),
+        f::LEFT_SPEED => w.float(field, fb.left_speed),
+        f::RIGHT_SPEED => w.float(field, fb.right_speed),
+        f::LEFT_CURRENT => w.float(field, fb.left_current),
+        f::RIGHT_CURRENT => w.float(field, fb.right_current),
+        f::LEFT_ENCODER => w.sint32(field, fb.left_encoder),
+        f::RIGHT_ENCODER => w.sint32(field, fb.right_encoder),
+        f::FAULT_FLAGS => w.uint32(field, fb.fault_flags),
+        f::SEQ => w.fixed32(field, fb.seq),
+        f::MODE => w.uint32(field, fb.mode),
+        f::CMD_SEQ => w.fixed32(field, fb.cmd_seq),
+        f::PROTOCOL_VERSION => w.uint32(field, PROTOCOL_VERSION),
+        _ => {}
+    }
 }
 
 /// Decodes a command frame.

@@ -383,6 +383,227 @@ pub(crate) fn check_feedback_field_step(src: &mut impl Source) {
     }
 }
 
+/// Room for one field and up to 4 bytes after it: a field of these messages is at most 6 bytes (a
+/// one-byte key, field numbers being below 16, and a 5-byte varint).
+const FIELD_BUF: usize = 10;
+
+/// The largest encoding of each command field, as summed in [`MAX_COMMAND_LEN`].
+fn command_field_max(field: u32) -> usize {
+    use command_field as f;
+    match field {
+        f::CONTROL_MODE => pb::max_uint32(field),
+        f::ENABLE => pb::max_uint32_upto(field, 1),
+        f::PROTOCOL_VERSION => pb::max_uint32_upto(field, PROTOCOL_VERSION),
+        _ => pb::max_fixed32(field),
+    }
+}
+
+/// The largest encoding of each feedback field, as summed in [`MAX_FEEDBACK_LEN`].
+fn feedback_field_max(field: u32) -> usize {
+    use feedback_field as f;
+    match field {
+        f::LEFT_ENCODER | f::RIGHT_ENCODER => pb::max_sint32(field),
+        f::FAULT_FLAGS | f::MODE => pb::max_uint32(field),
+        f::PROTOCOL_VERSION => pb::max_uint32_upto(field, PROTOCOL_VERSION),
+        _ => pb::max_fixed32(field),
+    }
+}
+
+/// The specification of a decoded command field: `to` with the member numbered `field` taken from
+/// `from` (`protocol_version`, kept beside the message, set to [`PROTOCOL_VERSION`]).
+fn with_command_field(
+    mut to: (MotorCommand, u32),
+    from: &MotorCommand,
+    field: u32,
+) -> (MotorCommand, u32) {
+    use command_field as f;
+    match field {
+        f::TIMESTAMP_US => to.0.timestamp_us = from.timestamp_us,
+        f::LEFT_SPEED_CMD => to.0.left_speed_cmd = from.left_speed_cmd,
+        f::RIGHT_SPEED_CMD => to.0.right_speed_cmd = from.right_speed_cmd,
+        f::CONTROL_MODE => to.0.control_mode = from.control_mode,
+        f::ENABLE => to.0.enable = from.enable,
+        f::SEQ => to.0.seq = from.seq,
+        f::PROTOCOL_VERSION => to.1 = PROTOCOL_VERSION,
+        _ => {}
+    }
+    to
+}
+
+/// The same for feedback fields.
+fn with_feedback_field(
+    mut to: (MotorFeedback, u32),
+    from: &MotorFeedback,
+    field: u32,
+) -> (MotorFeedback, u32) {
+    use feedback_field as f;
+    match field {
+        f::TIMESTAMP_US => to.0.timestamp_us = from.timestamp_us,
+        f::LEFT_SPEED => to.0.left_speed = from.left_speed,
+        f::RIGHT_SPEED => to.0.right_speed = from.right_speed,
+        f::LEFT_CURRENT => to.0.left_current = from.left_current,
+        f::RIGHT_CURRENT => to.0.right_current = from.right_current,
+        f::LEFT_ENCODER => to.0.left_encoder = from.left_encoder,
+        f::RIGHT_ENCODER => to.0.right_encoder = from.right_encoder,
+        f::FAULT_FLAGS => to.0.fault_flags = from.fault_flags,
+        f::SEQ => to.0.seq = from.seq,
+        f::MODE => to.0.mode = from.mode,
+        f::CMD_SEQ => to.0.cmd_seq = from.cmd_seq,
+        f::PROTOCOL_VERSION => to.1 = PROTOCOL_VERSION,
+        _ => {}
+    }
+    to
+}
+
+/// A message decoded so far, with the `protocol_version` read beside it.
+type Decoded<M> = (M, u32);
+
+/// A message's per-field functions, for [`field_round_trip`].
+struct FieldCodec<M> {
+    /// The encoder's writer of one field.
+    write: fn(&mut Writer<'_>, &M, u32),
+    /// The field's share of the payload bound.
+    max: fn(u32) -> usize,
+    /// The decoder's step for one field.
+    apply: fn(&mut Decoded<M>, u32, Value) -> Result<(), DecodeError>,
+    /// The specification of that step.
+    with: fn(Decoded<M>, &M, u32) -> Decoded<M>,
+    /// Bitwise equality of decoded states.
+    same: fn(&Decoded<M>, &Decoded<M>) -> bool,
+}
+
+impl<M> Clone for FieldCodec<M> {
+    fn clone(&self) -> Self {
+        *self
+    }
+}
+
+impl<M> Copy for FieldCodec<M> {}
+
+const COMMAND_FIELDS: FieldCodec<MotorCommand> = FieldCodec {
+    write: write_command_field,
+    max: command_field_max,
+    apply: apply_command_field,
+    with: with_command_field,
+    same: |a, b| same_command(&a.0, &b.0) && a.1 == b.1,
+};
+
+const FEEDBACK_FIELDS: FieldCodec<MotorFeedback> = FieldCodec {
+    write: write_feedback_field,
+    max: feedback_field_max,
+    apply: apply_feedback_field,
+    with: with_feedback_field,
+    same: |a, b| same_feedback(&a.0, &b.0) && a.1 == b.1,
+};
+
+/// The round trip of one field, the induction step of the message round trip: one field of `m`,
+/// written at the front of any bytes of any length (standing for the fields written after it, if
+/// any), then one step of
+/// the decode loop from any state decoded so far. The field is written only if `m` does not hold
+/// the default there (which is what a decoded message starts from), within its share of the
+/// payload's size bound; the step reads that field back, leaves exactly the bytes after it, and
+/// sets exactly that member to `m`'s value, or refuses a value out of its range. Returns the
+/// field, what the step gave, and whether the range check applies, for the caller's covers.
+fn field_round_trip<S: Source, M: Copy + Default>(
+    src: &mut S,
+    codec: &FieldCodec<M>,
+    m: &M,
+    field: u32,
+    state: (M, u32),
+    in_range: bool,
+) -> (usize, Result<(), DecodeError>) {
+    let FieldCodec {
+        write,
+        max,
+        apply,
+        with,
+        same,
+    } = *codec;
+    let default = <(M, u32)>::default();
+    let mut buf: [u8; FIELD_BUF] = src.bytes();
+    let n = {
+        let mut w = Writer::new(&mut buf);
+        write(&mut w, m, field);
+        w.len()
+    };
+    assert!(n <= max(field));
+    if n == 0 {
+        // Omitted: the decoded message keeps the default, which is `m`'s value.
+        assert!(same(&with(default, m, field), &default));
+        return (n, Ok(()));
+    }
+    // The payload ends anywhere after the field.
+    let total = n + usize::from(src.u8()) % (FIELD_BUF - n + 1);
+    let mut r = Reader::new(&buf[..total]);
+    let Ok(Some((read, v))) = r.next_field() else {
+        panic!("a written field did not read back");
+    };
+    assert_eq!(read, field);
+    assert_eq!(r.remaining(), total - n);
+    let mut got = state;
+    let applied = apply(&mut got, read, v);
+    if in_range {
+        assert!(applied.is_ok());
+        assert!(same(&got, &with(state, m, field)));
+    } else {
+        assert!(applied.is_err());
+    }
+    (n, applied)
+}
+
+/// [`field_round_trip`] for every command field.
+pub(crate) fn check_command_field_round_trip(src: &mut impl Source) {
+    let cmd = any_command(src);
+    let field = command_field::ALL[usize::from(src.below(command_field::ALL.len() as u8))];
+    let state = (any_command(src), src.u32());
+    let in_range = field != command_field::CONTROL_MODE || cmd.control_mode <= 0xFF;
+    let (n, applied) = field_round_trip(src, &COMMAND_FIELDS, &cmd, field, state, in_range);
+    cover!(src, n == 0, "default value omitted");
+    cover!(src, n == 6, "longest field");
+    cover!(src, applied.is_err(), "mode out of range refused");
+    cover!(
+        src,
+        n > 0 && field == command_field::LEFT_SPEED_CMD && cmd.left_speed_cmd.is_nan(),
+        "NaN speed"
+    );
+}
+
+/// [`field_round_trip`] for every feedback field.
+pub(crate) fn check_feedback_field_round_trip(src: &mut impl Source) {
+    use feedback_field as f;
+    let fb = any_feedback(src);
+    let field = f::ALL[usize::from(src.below(f::ALL.len() as u8))];
+    let state = (any_feedback(src), src.u32());
+    let out_of_range = (field == f::FAULT_FLAGS && fb.fault_flags > 0xFFFF)
+        || (field == f::MODE && fb.mode > 0xFF);
+    let in_range = !out_of_range;
+    let (n, applied) = field_round_trip(src, &FEEDBACK_FIELDS, &fb, field, state, in_range);
+    cover!(src, n == 0, "default value omitted");
+    cover!(src, n == 6, "longest field");
+    cover!(src, applied.is_err(), "value out of range refused");
+    cover!(
+        src,
+        n > 0 && field == f::LEFT_ENCODER && fb.left_encoder < 0,
+        "negative encoder count"
+    );
+}
+
+/// A frame made as the encoders make it (any payload of any length at the front of the payload
+/// region, zeros after it, `seal`) is opened to exactly that payload: the same bytes, in place.
+pub(crate) fn check_seal_open(src: &mut impl Source) {
+    let mut f: [u8; FRAME_LEN] = src.bytes();
+    let len = usize::from(src.below(MAX_PAYLOAD as u8 + 1));
+    f[PAYLOAD_OFFSET + len..CRC_OFFSET].fill(0);
+    seal(&mut f, len);
+    let Ok(opened) = open(&f) else {
+        panic!("a sealed frame was refused");
+    };
+    assert_eq!(opened.len(), len);
+    assert!(core::ptr::eq(opened.as_ptr(), f[PAYLOAD_OFFSET..].as_ptr()));
+    cover!(src, len == MAX_PAYLOAD, "full payload");
+    cover!(src, len == 0, "empty payload");
+}
+
 /// Kani harnesses. Those marked `cfg_attr(kani_pending, kani::proof)` do not finish on today's
 /// solvers (a symbolic 64-byte frame through the protobuf decoder, or two CRC circuits over the same
 /// symbolic bytes); they run as harnesses only with `RUSTFLAGS="--cfg kani_pending" cargo kani`, and
@@ -414,6 +635,34 @@ mod proofs {
     #[kani::unwind(20)]
     fn verify_bit_flip_refused_by_open() {
         check_bit_flip_refused_by_open(&mut KaniSource, &sample_command_frame());
+    }
+
+    #[kani::proof]
+    #[kani::unwind(11)]
+    fn verify_command_field_round_trip() {
+        check_command_field_round_trip(&mut KaniSource);
+    }
+
+    #[kani::proof]
+    #[kani::unwind(13)]
+    fn verify_feedback_field_round_trip() {
+        check_feedback_field_round_trip(&mut KaniSource);
+    }
+
+    #[kani::proof]
+    #[kani::unwind(63)]
+    fn verify_seal_open() {
+        check_seal_open(&mut KaniSource);
+    }
+
+    #[kani::proof]
+    #[kani::unwind(63)]
+    #[kani::stub(
+        crate::crc16::checksum,
+        crate::crc16::verification::model::pure_checksum
+    )]
+    fn verify_seal_open_pure() {
+        check_seal_open(&mut KaniSource);
     }
 
     #[kani::proof]
@@ -471,6 +720,37 @@ mod twins {
     use statemachine::harness::Twin;
 
     const CASES: u32 = 20_000;
+
+    #[test]
+    fn command_field_round_trip() {
+        Twin::run(0xA3_0010, CASES, check_command_field_round_trip).assert_covered(4);
+    }
+
+    #[test]
+    fn feedback_field_round_trip() {
+        Twin::run(0xA3_0011, CASES, check_feedback_field_round_trip).assert_covered(4);
+    }
+
+    #[test]
+    fn seal_open() {
+        Twin::run(0xA3_0012, CASES, check_seal_open).assert_covered(2);
+    }
+
+    /// The per-field bounds of the field round trips add up to the payload bounds the crate
+    /// const-asserts to fit.
+    #[test]
+    fn field_bounds_sum_to_the_payload_bounds() {
+        let command: usize = command_field::ALL
+            .iter()
+            .map(|&f| command_field_max(f))
+            .sum();
+        let feedback: usize = feedback_field::ALL
+            .iter()
+            .map(|&f| feedback_field_max(f))
+            .sum();
+        assert_eq!(command, MAX_COMMAND_LEN);
+        assert_eq!(feedback, MAX_FEEDBACK_LEN);
+    }
 
     #[test]
     fn open_total() {
