@@ -649,19 +649,24 @@ mod proofs {
         check_feedback_field_round_trip(&mut KaniSource);
     }
 
-    #[kani::proof]
-    #[kani::unwind(63)]
-    fn verify_seal_open() {
-        check_seal_open(&mut KaniSource);
-    }
-
+    /// With the CRC replaced by a cheap pure function: the property needs only that `open`'s
+    /// checksum of the 62 bytes equals the one `seal` stored for the same bytes, true of every
+    /// pure function and so of the real CRC (see `model::pure_checksum`).
     #[kani::proof]
     #[kani::unwind(63)]
     #[kani::stub(
         crate::crc16::checksum,
         crate::crc16::verification::model::pure_checksum
     )]
-    fn verify_seal_open_pure() {
+    fn verify_seal_open() {
+        check_seal_open(&mut KaniSource);
+    }
+
+    // Pending: the same with the real CRC, not finished in 7 min (5 GB): the solver has to show
+    // two CRC circuits over the same symbolic bytes equal.
+    #[cfg_attr(kani_pending, kani::proof)]
+    #[cfg_attr(kani_pending, kani::unwind(63))]
+    fn verify_seal_open_real_crc() {
         check_seal_open(&mut KaniSource);
     }
 
