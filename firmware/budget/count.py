@@ -1,8 +1,8 @@
 """gdb script: counts executed Cortex-M4 instructions per call of the firmware's units under QEMU.
 
 
-Loaded by run.sh as `gdb-multiarch -batch -x count.py ELF`. For each unit it stops at the entry,
-single-steps (`stepi`) until the unit returns, counting the steps (the return instruction included
+Loaded by run.sh as `gdb-multiarch -batch -x count.py ELF`. For each unit it stops at its first
+instruction, single-steps (`stepi`) until the unit returns, counting the steps (the return instruction included
 for functions; for handlers, up to and including the exception return). It also records the
 deepest stack pointer seen below the entry SP (the handler's own stack use, excluding the
 hardware-stacked exception frame).
@@ -10,6 +10,7 @@ hardware-stacked exception frame).
 import gdb  # noqa: F401  (provided by gdb)
 import json
 import os
+import re
 
 OUT = os.environ["BUDGET_JSON"]
 SAMPLES = int(os.environ.get("BUDGET_SAMPLES", "5"))
@@ -80,7 +81,12 @@ def main():
     for title, sym, kind in UNITS:
         if only not in sym:
             continue
-        bp = gdb.Breakpoint(sym, internal=True)
+        # At the unit's first instruction (`*address`), not after the prologue where gdb puts a
+        # breakpoint on a name: the prologue may already use `lr` as a scratch register, and the
+        # return address is read from `lr` at the stop.
+        info = gdb.execute("info address " + sym, to_string=True)
+        address = int(re.search(r"at (?:address )?(0x[0-9a-fA-F]+)", info).group(1), 16) & ~1
+        bp = gdb.Breakpoint("*" + hex(address), internal=True)
         counts = []
         stacks = []
         pcs = {}
