@@ -549,9 +549,9 @@ impl StreamDecoder {
         self.len
     }
 
-    /// The bytes held.
+    /// The bytes held (none if the length were ever out of range, as `drop_front` also treats it).
     fn held(&self) -> &[u8] {
-        self.buf.get(..self.len).unwrap_or(&self.buf)
+        self.buf.get(..self.len).unwrap_or(&[])
     }
 
     /// Discards a partial frame (e.g. after an inter-byte timeout), counting its bytes as dropped.

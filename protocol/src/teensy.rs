@@ -255,7 +255,7 @@ impl<const N: usize> CmdMsg<N> {
         if frame.len() != Self::ROBUST_LEN || frame.last() != Some(&0) {
             return Err(RejectReason::Framing);
         }
-        let mut body = [0u8; ROBUST_BUF];
+        let mut body = [0u8; ROBUST_BODY_BUF];
         let n = unstuff(frame, &mut body).ok_or(RejectReason::Framing)?;
         Self::decode_body(body.get(..n).ok_or(RejectReason::Framing)?)
     }

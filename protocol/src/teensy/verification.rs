@@ -110,9 +110,7 @@ pub(crate) fn check_stream_delivers_frame(src: &mut impl Source) {
         // A valid frame (the twin would not draw one at random).
         let mut body = [0u8; ROBUST_BODY_BUF];
         let _ = any_msg(src).encode_body(&mut body);
-        let mut b = [0u8; BODY];
-        b.copy_from_slice(&body[..BODY]);
-        frame = stuff(&b);
+        assert_eq!(stuff_into(&body[..BODY], &mut frame), FRAME);
     }
     for b in frame.iter_mut().take(FRAME - 1) {
         if *b == 0 {
