@@ -25,7 +25,7 @@ fn frame64(input: &[u8], fix_crc: bool) -> [u8; amr::FRAME_LEN] {
     f[..n].copy_from_slice(&input[..n]);
     if fix_crc {
         let crc = crc16::checksum(&f[..amr::CRC_OFFSET]);
-        f[amr::CRC_OFFSET..].copy_from_slice(&crc.to_le_bytes());
+        f[amr::CRC_OFFSET..].copy_from_slice(&crc.to_be_bytes());
     }
     f
 }
