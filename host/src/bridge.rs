@@ -336,6 +336,7 @@ impl Bridge {
             control_mode: ControlMode::Speed as u32,
             enable,
             seq: self.seq,
+            request: 0,
         }
     }
 

@@ -35,7 +35,7 @@ pub const DEFAULT_MOTORS: usize = 4;
 pub const SHAPES: &str = r#"JSON shapes (decode prints them, encode takes them; in encode a missing field is 0 / false /
 the first enum value, an unknown field or a wrong type is an error naming the field):
 
-amr-command   {"timestamp_us":1000,"left_speed_cmd":1.5,"right_speed_cmd":-1.5,"control_mode":1,"enable":true,"seq":1}
+amr-command   {"timestamp_us":1000,"left_speed_cmd":1.5,"right_speed_cmd":-1.5,"control_mode":1,"enable":true,"seq":1,"request":0}
 amr-feedback  {"timestamp_us":5,"left_speed":0.5,"right_speed":-0.5,"left_current":1.25,"right_current":0.75,"left_encoder":-3,"right_encoder":7,"fault_flags":2,"seq":9,"mode":1,"cmd_seq":8}
 cdc           {"type":"set_motor_pwm","pwm":[-1000,1000,0,1],"timeout_ms":200}
               {"type":"motor_enable","enable":true}        (required field)

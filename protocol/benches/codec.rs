@@ -13,6 +13,7 @@ fn benches(c: &mut Criterion) {
         control_mode: 1,
         enable: true,
         seq: 4242,
+        request: 0,
     };
     let fb = amr::MotorFeedback {
         timestamp_us: 987_654_321,

@@ -7,7 +7,9 @@
     clippy::panic
 )]
 
-use protocol::amr::{self, MotorCommand, MotorFeedback, FRAME_LEN};
+use protocol::amr::{
+    self, BoardProfile, McuInfo, MotorCommand, MotorFeedback, ResetCause, FRAME_LEN,
+};
 use std::collections::HashMap;
 
 #[path = "../tests/common/structs.rs"]
@@ -49,6 +51,22 @@ fn amr_frames(cases: &str) -> String {
                     control_mode: u("control_mode"),
                     enable: m["enable"] == 1,
                     seq: u("seq"),
+                    request: u("request"),
+                },
+                &mut frame,
+            ),
+            "info" => amr::encode_info(
+                &McuInfo {
+                    fw_version: u("fw_version"),
+                    git_hash: u("git_hash"),
+                    board: BoardProfile::from_wire(u("board")).expect("a defined board"),
+                    build_date: u("build_date"),
+                    reset_cause: ResetCause::from_wire(u("reset_cause"))
+                        .expect("a defined reset cause"),
+                    reset_count: u("reset_count"),
+                    panic_line: u("panic_line"),
+                    seq: u("seq"),
+                    dirty: m["dirty"] == 1,
                 },
                 &mut frame,
             ),

@@ -104,6 +104,7 @@ fn run(class: usize, frames: u64, seed: u64) -> Counts {
                 control_mode: 1,
                 enable: true,
                 seq: rng.next() as u32,
+                request: 0,
             };
             amr::encode_command(&cmd, &mut base);
         }

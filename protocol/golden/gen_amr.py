@@ -1,6 +1,9 @@
 #!/usr/bin/env python3
 """Golden vectors for the seed 000 AMR SPI frame, built with the Python `protobuf` library.
 
+Three kinds of frame: `command` (MotorCommand), `feedback` (MotorFeedback) and `info` (McuInfo, sent in
+the feedback slot after an identity request; it carries info_version instead of protocol_version).
+
     gen_amr.py write            writes amr_cases.txt (the values) and amr_python.txt (frames encoded here)
     gen_amr.py check FRAMES     decodes FRAMES (e.g. written by the Rust encoder) and compares with amr_cases.txt
 
@@ -22,6 +25,7 @@ PROTO_DIR = os.path.join(HERE, "..", "proto")
 FRAME_LEN = 64
 CRC_OFFSET = FRAME_LEN - 2
 PROTOCOL_VERSION = 1
+INFO_VERSION = 1
 
 
 def crc16_ccitt_false(data: bytes) -> int:
@@ -46,9 +50,8 @@ def load_classes():
     pool = descriptor_pool.DescriptorPool()
     for fd in fds.file:
         pool.Add(fd)
-    cmd = message_factory.GetMessageClass(pool.FindMessageTypeByName("amr.MotorCommand"))
-    fb = message_factory.GetMessageClass(pool.FindMessageTypeByName("amr.MotorFeedback"))
-    return cmd, fb
+    return {kind: message_factory.GetMessageClass(pool.FindMessageTypeByName("amr." + name))
+            for kind, name in (("command", "MotorCommand"), ("feedback", "MotorFeedback"), ("info", "McuInfo"))}
 
 
 def f32_bits(x: float) -> int:
@@ -59,20 +62,34 @@ def bits_f32(b: int) -> float:
     return struct.unpack("<f", struct.pack("<I", b))[0]
 
 
-COMMAND_FIELDS = ["timestamp_us", "left_speed_cmd", "right_speed_cmd", "control_mode", "enable", "seq"]
+COMMAND_FIELDS = ["timestamp_us", "left_speed_cmd", "right_speed_cmd", "control_mode", "enable", "seq", "request"]
 FEEDBACK_FIELDS = ["timestamp_us", "left_speed", "right_speed", "left_current", "right_current",
                    "left_encoder", "right_encoder", "fault_flags", "seq", "mode", "cmd_seq"]
+INFO_FIELDS = ["fw_version", "git_hash", "board", "build_date", "reset_cause", "reset_count", "panic_line", "seq",
+               "dirty"]
+FIELDS = {"command": COMMAND_FIELDS, "feedback": FEEDBACK_FIELDS, "info": INFO_FIELDS}
+# The field that must equal the version, per kind (the info message has no protocol_version).
+VERSION_FIELD = {"command": ("protocol_version", PROTOCOL_VERSION), "feedback": ("protocol_version", PROTOCOL_VERSION),
+                 "info": ("info_version", INFO_VERSION)}
 FLOATS = {"left_speed_cmd", "right_speed_cmd", "left_speed", "right_speed", "left_current", "right_current"}
 
 # Values chosen to exercise every field: zero (omitted), small and large varints, negative zigzag,
 # NaN (passes the wire, the ladder refuses it), extremes of every type.
 COMMANDS = [
-    dict(timestamp_us=0, left_speed_cmd=0.0, right_speed_cmd=0.0, control_mode=0, enable=0, seq=0),
-    dict(timestamp_us=1000, left_speed_cmd=1.5, right_speed_cmd=-1.5, control_mode=1, enable=1, seq=1),
-    dict(timestamp_us=4294967295, left_speed_cmd=20.0, right_speed_cmd=-20.0, control_mode=1, enable=1, seq=4294967295),
-    dict(timestamp_us=123456789, left_speed_cmd=0.1, right_speed_cmd=3.25, control_mode=3, enable=0, seq=305419896),
-    dict(timestamp_us=7, left_speed_cmd=float("nan"), right_speed_cmd=float("inf"), control_mode=255, enable=1, seq=2),
-    dict(timestamp_us=268435456, left_speed_cmd=-3.4028234663852886e38, right_speed_cmd=1e-45, control_mode=2, enable=0, seq=128),
+    dict(timestamp_us=0, left_speed_cmd=0.0, right_speed_cmd=0.0, control_mode=0, enable=0, seq=0, request=0),
+    dict(timestamp_us=1000, left_speed_cmd=1.5, right_speed_cmd=-1.5, control_mode=1, enable=1, seq=1, request=0),
+    dict(timestamp_us=4294967295, left_speed_cmd=20.0, right_speed_cmd=-20.0, control_mode=1, enable=1, seq=4294967295,
+         request=0),
+    dict(timestamp_us=123456789, left_speed_cmd=0.1, right_speed_cmd=3.25, control_mode=3, enable=0, seq=305419896,
+         request=0),
+    dict(timestamp_us=7, left_speed_cmd=float("nan"), right_speed_cmd=float("inf"), control_mode=255, enable=1, seq=2,
+         request=0),
+    dict(timestamp_us=268435456, left_speed_cmd=-3.4028234663852886e38, right_speed_cmd=1e-45, control_mode=2, enable=0,
+         seq=128, request=0),
+    # The identity request (enable 0, speeds 0, as `motorlink info` sends it), and a request this
+    # version does not define (still a valid command: the MCU ignores it).
+    dict(timestamp_us=5000, left_speed_cmd=0.0, right_speed_cmd=0.0, control_mode=0, enable=0, seq=77, request=1),
+    dict(timestamp_us=1, left_speed_cmd=0.5, right_speed_cmd=0.5, control_mode=1, enable=1, seq=3, request=4294967295),
 ]
 FEEDBACKS = [
     dict(timestamp_us=0, left_speed=0.0, right_speed=0.0, left_current=0.0, right_current=0.0, left_encoder=0,
@@ -84,6 +101,18 @@ FEEDBACKS = [
          cmd_seq=4294967295),
     dict(timestamp_us=99999, left_speed=float("-inf"), right_speed=0.333, left_current=1e-3, right_current=0.0,
          left_encoder=123456, right_encoder=-654321, fault_flags=0x0001, seq=77, mode=1, cmd_seq=76),
+]
+# board: 0 AMR SPI, 1 CDC, 2 Teensy, 3 Pi SPI; reset_cause: 0 unknown .. 8 low-power.
+INFOS = [
+    dict(fw_version=0, git_hash=0, board=0, build_date=0, reset_cause=0, reset_count=0, panic_line=0, seq=0, dirty=0),
+    dict(fw_version=0x010203, git_hash=0x1A2B3C4D, board=0, build_date=20261130, reset_cause=1, reset_count=0,
+         panic_line=0, seq=1234, dirty=0),
+    dict(fw_version=0x00000A, git_hash=0xDEADBEEF, board=3, build_date=20250101, reset_cause=4, reset_count=3,
+         panic_line=417, seq=4294967295, dirty=1),
+    dict(fw_version=4294967295, git_hash=4294967295, board=2, build_date=4294967295, reset_cause=8,
+         reset_count=4294967295, panic_line=4294967295, seq=2, dirty=1),
+    dict(fw_version=0x020000, git_hash=0x00000001, board=1, build_date=19991231, reset_cause=3, reset_count=1,
+         panic_line=0, seq=65536, dirty=0),
 ]
 
 
@@ -98,15 +127,16 @@ def normalise(kind, values):
 def encode(cls, kind, values):
     m = cls()
     for k, v in values.items():
-        setattr(m, k, bits_f32(v) if k in FLOATS else v)
-    m.protocol_version = PROTOCOL_VERSION
+        setattr(m, k, bits_f32(v) if k in FLOATS else bool(v) if k == "dirty" else v)
+    name, version = VERSION_FIELD[kind]
+    setattr(m, name, version)
     payload = m.SerializeToString()
     assert len(payload) <= CRC_OFFSET - 1, (kind, len(payload))
     body = bytes([len(payload)]) + payload + bytes(CRC_OFFSET - 1 - len(payload))
     return body + struct.pack(">H", crc16_ccitt_false(body))
 
 
-def decode(cls, frame: bytes):
+def decode(cls, kind, frame: bytes):
     if len(frame) != FRAME_LEN:
         raise ValueError("length")
     body, crc = frame[:CRC_OFFSET], struct.unpack(">H", frame[CRC_OFFSET:])[0]
@@ -116,13 +146,14 @@ def decode(cls, frame: bytes):
     if n > CRC_OFFSET - 1 or any(body[1 + n:]):
         raise ValueError("framing")
     m = cls.FromString(body[1:1 + n])
-    if m.protocol_version != PROTOCOL_VERSION:
+    name, version = VERSION_FIELD[kind]
+    if getattr(m, name) != version:
         raise ValueError("version")
     return m
 
 
 def fmt_case(kind, values):
-    fields = COMMAND_FIELDS if kind == "command" else FEEDBACK_FIELDS
+    fields = FIELDS[kind]
     return kind + " " + " ".join(f"{k}={values[k]}" for k in fields)
 
 
@@ -132,10 +163,21 @@ def parse_case(line):
 
 
 def main():
-    cmd_cls, fb_cls = load_classes()
-    classes = {"command": cmd_cls, "feedback": fb_cls}
+    classes = load_classes()
     cases = [("command", normalise("command", c)) for c in COMMANDS] + \
-            [("feedback", normalise("feedback", c)) for c in FEEDBACKS]
+            [("feedback", normalise("feedback", c)) for c in FEEDBACKS] + \
+            [("info", normalise("info", c)) for c in INFOS]
+    # An info frame is never taken for a command or a feedback, nor the reverse: each fails the
+    # other's version check (command and feedback share protocol_version; they travel in opposite directions).
+    for kind, values in cases:
+        frame = encode(classes[kind], kind, values)
+        for other in (o for o in classes if o != kind and "info" in (o, kind)):
+            try:
+                decode(classes[other], other, frame)
+            except ValueError as e:
+                assert str(e) == "version", (kind, other, e)
+            else:
+                raise AssertionError(f"a {kind} frame decoded as {other}")
     if sys.argv[1:2] == ["write"]:
         with open(os.path.join(HERE, "amr_cases.txt"), "w") as f:
             for kind, values in cases:
@@ -151,7 +193,7 @@ def main():
         bad = 0
         for (kind, values), (fkind, hexframe) in zip(cases, frames):
             assert kind == fkind
-            m = decode(classes[kind], bytes.fromhex(hexframe))
+            m = decode(classes[kind], kind, bytes.fromhex(hexframe))
             got = {k: (f32_bits(getattr(m, k)) if k in FLOATS else int(getattr(m, k))) for k in values}
             if got != values:
                 bad += 1

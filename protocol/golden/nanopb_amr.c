@@ -1,4 +1,5 @@
-/* Golden vectors for the seed 000 AMR SPI frame from the nanopb C library.
+/* Golden vectors for the seed 000 AMR SPI frame from the nanopb C library: MotorCommand, MotorFeedback
+ * and McuInfo (which carries info_version in place of protocol_version).
  *
  *   nanopb_amr encode CASES          prints one frame per case line (nanopb encoder, seed CRC loop)
  *   nanopb_amr check CASES FRAMES    decodes FRAMES with nanopb, compares with CASES, exit 1 on mismatch
@@ -19,6 +20,19 @@
 #define FRAME_LEN 64
 #define CRC_OFFSET (FRAME_LEN - 2)
 #define PROTOCOL_VERSION 1
+#define INFO_VERSION 1
+
+enum kind { COMMAND, FEEDBACK, INFO };
+
+static enum kind kind_of(const char *line) {
+    if (strncmp(line, "command", 7) == 0) return COMMAND;
+    if (strncmp(line, "feedback", 8) == 0) return FEEDBACK;
+    if (strncmp(line, "info", 4) == 0) return INFO;
+    fprintf(stderr, "unknown kind in %s\n", line);
+    exit(2);
+}
+
+static const char *const KIND_NAMES[] = {"command", "feedback", "info"};
 
 /* The seed's CRC-16/CCITT loop, unchanged. */
 static uint16_t crc16_ccitt(const uint8_t *data, size_t len) {
@@ -68,6 +82,7 @@ static void parse_command(const char *line, amr_MotorCommand *m) {
     m->enable = (uint8_t)field(line, "enable");
     m->seq = (uint32_t)field(line, "seq");
     m->protocol_version = PROTOCOL_VERSION;
+    m->request = (uint32_t)field(line, "request");
 }
 
 static void parse_feedback(const char *line, amr_MotorFeedback *m) {
@@ -86,6 +101,20 @@ static void parse_feedback(const char *line, amr_MotorFeedback *m) {
     m->protocol_version = PROTOCOL_VERSION;
 }
 
+static void parse_info(const char *line, amr_McuInfo *m) {
+    *m = (amr_McuInfo)amr_McuInfo_init_zero;
+    m->info_version = INFO_VERSION;
+    m->fw_version = (uint32_t)field(line, "fw_version");
+    m->git_hash = (uint32_t)field(line, "git_hash");
+    m->board = (uint8_t)field(line, "board");
+    m->build_date = (uint32_t)field(line, "build_date");
+    m->reset_cause = (uint8_t)field(line, "reset_cause");
+    m->reset_count = (uint32_t)field(line, "reset_count");
+    m->panic_line = (uint32_t)field(line, "panic_line");
+    m->seq = (uint32_t)field(line, "seq");
+    m->dirty = field(line, "dirty") != 0;
+}
+
 static void print_frame(const char *kind, const uint8_t *frame) {
     printf("%s ", kind);
     for (int i = 0; i < FRAME_LEN; i++) printf("%02x", frame[i]);
@@ -96,14 +125,18 @@ static int encode_case(const char *line, uint8_t *frame) {
     memset(frame, 0, FRAME_LEN);
     pb_ostream_t os = pb_ostream_from_buffer(frame + 1, CRC_OFFSET - 1);
     int ok;
-    if (strncmp(line, "command", 7) == 0) {
+    if (kind_of(line) == COMMAND) {
         amr_MotorCommand m;
         parse_command(line, &m);
         ok = pb_encode(&os, amr_MotorCommand_fields, &m);
-    } else {
+    } else if (kind_of(line) == FEEDBACK) {
         amr_MotorFeedback m;
         parse_feedback(line, &m);
         ok = pb_encode(&os, amr_MotorFeedback_fields, &m);
+    } else {
+        amr_McuInfo m;
+        parse_info(line, &m);
+        ok = pb_encode(&os, amr_McuInfo_fields, &m);
     }
     if (!ok) {
         fprintf(stderr, "encode failed: %s\n", PB_GET_ERROR(&os));
@@ -138,7 +171,7 @@ static int check_case(const char *line, const uint8_t *frame) {
     for (size_t i = 1 + n; i < CRC_OFFSET; i++)
         if (frame[i] != 0) return 0;
     pb_istream_t is = pb_istream_from_buffer(frame + 1, n);
-    if (strncmp(line, "command", 7) == 0) {
+    if (kind_of(line) == COMMAND) {
         amr_MotorCommand want, got = amr_MotorCommand_init_zero;
         parse_command(line, &want);
         if (!pb_decode(&is, amr_MotorCommand_fields, &got)) {
@@ -149,8 +182,8 @@ static int check_case(const char *line, const uint8_t *frame) {
                float_to_bits(got.left_speed_cmd) == float_to_bits(want.left_speed_cmd) &&
                float_to_bits(got.right_speed_cmd) == float_to_bits(want.right_speed_cmd) &&
                got.control_mode == want.control_mode && got.enable == want.enable && got.seq == want.seq &&
-               got.protocol_version == PROTOCOL_VERSION;
-    } else {
+               got.protocol_version == PROTOCOL_VERSION && got.request == want.request;
+    } else if (kind_of(line) == FEEDBACK) {
         amr_MotorFeedback want, got = amr_MotorFeedback_init_zero;
         parse_feedback(line, &want);
         if (!pb_decode(&is, amr_MotorFeedback_fields, &got)) {
@@ -165,6 +198,17 @@ static int check_case(const char *line, const uint8_t *frame) {
                got.left_encoder == want.left_encoder && got.right_encoder == want.right_encoder &&
                got.fault_flags == want.fault_flags && got.seq == want.seq && got.mode == want.mode &&
                got.cmd_seq == want.cmd_seq && got.protocol_version == PROTOCOL_VERSION;
+    } else {
+        amr_McuInfo want, got = amr_McuInfo_init_zero;
+        parse_info(line, &want);
+        if (!pb_decode(&is, amr_McuInfo_fields, &got)) {
+            fprintf(stderr, "decode failed: %s\n", PB_GET_ERROR(&is));
+            return 0;
+        }
+        return got.info_version == INFO_VERSION && got.fw_version == want.fw_version &&
+               got.git_hash == want.git_hash && got.board == want.board && got.build_date == want.build_date &&
+               got.reset_cause == want.reset_cause && got.reset_count == want.reset_count &&
+               got.panic_line == want.panic_line && got.seq == want.seq && got.dirty == want.dirty;
     }
 }
 
@@ -178,11 +222,11 @@ int main(int argc, char **argv) {
     char line[1024], fline[1024];
     uint8_t frame[FRAME_LEN];
     if (strcmp(argv[1], "encode") == 0) {
-        fprintf(stderr, "nanopb sizes: amr_MotorCommand_size=%d amr_MotorFeedback_size=%d\n",
-                amr_MotorCommand_size, amr_MotorFeedback_size);
+        fprintf(stderr, "nanopb sizes: amr_MotorCommand_size=%d amr_MotorFeedback_size=%d amr_McuInfo_size=%d\n",
+                amr_MotorCommand_size, amr_MotorFeedback_size, amr_McuInfo_size);
         while (fgets(line, sizeof line, cases)) {
             if (!encode_case(line, frame)) return 1;
-            print_frame(strncmp(line, "command", 7) == 0 ? "command" : "feedback", frame);
+            print_frame(KIND_NAMES[kind_of(line)], frame);
         }
         return 0;
     }

@@ -10,6 +10,7 @@
 )]
 
 use protocol::{amr, cdc, crc16, pi_spi, teensy};
+use statemachine::RejectReason;
 use std::sync::atomic::{AtomicU64, Ordering};
 
 fn report(name: &str, n: &AtomicU64) {
@@ -70,6 +71,45 @@ fn fuzz_amr_feedback() {
             }
         });
     report("amr_feedback", &N);
+}
+
+/// Every 64-byte input through `decode_info` and `decode_mcu_frame`: no panic, whatever decodes
+/// re-encodes to the same message, and the two decoders agree on which frames are info frames.
+#[test]
+fn fuzz_amr_info() {
+    static N: AtomicU64 = AtomicU64::new(0);
+    bolero::check!()
+        .with_max_len(amr::FRAME_LEN)
+        .for_each(|input: &[u8]| {
+            N.fetch_add(1, Ordering::Relaxed);
+            for fix in [false, true] {
+                let f = frame64(input, fix);
+                let info = amr::decode_info(&f);
+                let any = amr::decode_mcu_frame(&f);
+                match any {
+                    Ok(amr::McuFrame::Info(i)) => {
+                        assert_eq!(info, Ok(i));
+                        assert_eq!(amr::decode_feedback(&f), Err(RejectReason::Version));
+                    }
+                    Ok(amr::McuFrame::Feedback(fb)) => {
+                        let direct = amr::decode_feedback(&f).unwrap();
+                        assert_eq!(format!("{fb:?}"), format!("{direct:?}"));
+                    }
+                    // A frame refused as feedback for its version is refused for what the info
+                    // decoder found; any other refusal is the feedback decoder's.
+                    Err(e) => match amr::decode_feedback(&f).map(|_| ()) {
+                        Err(RejectReason::Version) => assert_eq!(info.map(|_| ()), Err(e)),
+                        other => assert_eq!(other, Err(e)),
+                    },
+                }
+                if let Ok(i) = info {
+                    let mut g = [0u8; amr::FRAME_LEN];
+                    amr::encode_info(&i, &mut g);
+                    assert_eq!(amr::decode_info(&g), Ok(i));
+                }
+            }
+        });
+    report("amr_info", &N);
 }
 
 #[test]

@@ -8,7 +8,9 @@
     missing_docs
 )]
 
-use protocol::amr::{self, MotorCommand, MotorFeedback, FRAME_LEN};
+use protocol::amr::{
+    self, BoardProfile, McuFrame, McuInfo, MotorCommand, MotorFeedback, ResetCause, FRAME_LEN,
+};
 
 fn hex(s: &str) -> Vec<u8> {
     (0..s.len())
@@ -32,6 +34,7 @@ fn kv(line: &str) -> (String, std::collections::HashMap<String, i64>) {
 enum Case {
     Command(MotorCommand),
     Feedback(MotorFeedback),
+    Info(McuInfo),
 }
 
 fn amr_cases() -> Vec<Case> {
@@ -49,6 +52,7 @@ fn amr_cases() -> Vec<Case> {
                     control_mode: u("control_mode"),
                     enable: m["enable"] == 1,
                     seq: u("seq"),
+                    request: u("request"),
                 }),
                 "feedback" => Case::Feedback(MotorFeedback {
                     timestamp_us: u("timestamp_us"),
@@ -62,6 +66,17 @@ fn amr_cases() -> Vec<Case> {
                     seq: u("seq"),
                     mode: u("mode"),
                     cmd_seq: u("cmd_seq"),
+                }),
+                "info" => Case::Info(McuInfo {
+                    fw_version: u("fw_version"),
+                    git_hash: u("git_hash"),
+                    board: BoardProfile::from_wire(u("board")).unwrap(),
+                    build_date: u("build_date"),
+                    reset_cause: ResetCause::from_wire(u("reset_cause")).unwrap(),
+                    reset_count: u("reset_count"),
+                    panic_line: u("panic_line"),
+                    seq: u("seq"),
+                    dirty: m["dirty"] == 1,
                 }),
                 other => panic!("unknown kind {other}"),
             }
@@ -89,6 +104,7 @@ fn check_amr_frames(source: &str, text: &str) {
     let frames = frames(text);
     assert_eq!(cases.len(), frames.len(), "{source}");
     assert!(cases.len() >= 10);
+    assert!(cases.iter().filter(|c| matches!(c, Case::Info(_))).count() >= 5);
     for (i, (case, frame)) in cases.iter().zip(&frames).enumerate() {
         let mut ours = [0u8; FRAME_LEN];
         match case {
@@ -103,6 +119,18 @@ fn check_amr_frames(source: &str, text: &str) {
                     amr::decode_feedback(frame).unwrap_or_else(|e| panic!("{source} #{i}: {e:?}"));
                 assert!(same(&d, fb), "{source} #{i}: {d:?} != {fb:?}");
                 amr::encode_feedback(fb, &mut ours);
+            }
+            Case::Info(info) => {
+                let d = amr::decode_info(frame).unwrap_or_else(|e| panic!("{source} #{i}: {e:?}"));
+                assert_eq!(&d, info, "{source} #{i}");
+                assert_eq!(amr::decode_mcu_frame(frame), Ok(McuFrame::Info(*info)));
+                // Frames built by another implementation are not taken for feedback either.
+                assert_eq!(
+                    amr::decode_feedback(frame),
+                    Err(statemachine::RejectReason::Version),
+                    "{source} #{i}"
+                );
+                amr::encode_info(info, &mut ours);
             }
         }
         // Same field order and proto3 zero omission: the encodings agree byte for byte.
@@ -135,6 +163,7 @@ fn amr_size_bounds_agree_with_nanopb() {
         m["amr_MotorFeedback_size"] as usize,
         amr::NANOPB_FEEDBACK_SIZE
     );
+    assert_eq!(m["amr_McuInfo_size"] as usize, amr::NANOPB_INFO_SIZE);
 }
 
 #[test]

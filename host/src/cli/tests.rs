@@ -18,7 +18,7 @@ fn examples() -> Vec<(FrameKind, &'static str)> {
     vec![
         (
             FrameKind::AmrCommand,
-            r#"{"timestamp_us":1000,"left_speed_cmd":1.5,"right_speed_cmd":-1.5,"control_mode":1,"enable":true,"seq":1}"#,
+            r#"{"timestamp_us":1000,"left_speed_cmd":1.5,"right_speed_cmd":-1.5,"control_mode":1,"enable":true,"seq":1,"request":0}"#,
         ),
         (
             FrameKind::AmrFeedback,
@@ -340,6 +340,9 @@ fn golden_amr_frames_decode_to_the_python_values() {
     ];
     let mut n = 0;
     for (case, frame) in cases.lines().zip(frames.lines()) {
+        if case.starts_with("info ") {
+            continue; // McuInfo frames: no frame kind for them here yet
+        }
         let c: Vec<&str> = case.split_whitespace().collect();
         let f: Vec<&str> = frame.split_whitespace().collect();
         assert_eq!(c[0], f[0]);
@@ -368,7 +371,7 @@ fn golden_amr_frames_decode_to_the_python_values() {
         }
         n += 1;
     }
-    assert_eq!(n, 10);
+    assert_eq!(n, 12);
 }
 
 // ---- errors: each names the problem ----

@@ -1,5 +1,5 @@
 //! Kani harnesses of the seed 000 codec and their `cargo test` twins: total decoders, round trips,
-//! single-bit errors always detected.
+//! single-bit errors always detected; for `MotorCommand`, `MotorFeedback` and `McuInfo`.
 
 use super::*;
 use statemachine::harness::Source;
@@ -13,6 +13,7 @@ pub(crate) fn any_command(src: &mut impl Source) -> MotorCommand {
         control_mode: src.u32(),
         enable: src.bool(),
         seq: src.u32(),
+        request: src.u32(),
     }
 }
 
@@ -32,6 +33,44 @@ pub(crate) fn any_feedback(src: &mut impl Source) -> MotorFeedback {
     }
 }
 
+/// Any info message: every field any value its type holds (the enums: every variant).
+pub(crate) fn any_info(src: &mut impl Source) -> McuInfo {
+    McuInfo {
+        fw_version: src.u32(),
+        git_hash: src.u32(),
+        board: any_board(src),
+        build_date: src.u32(),
+        reset_cause: any_reset_cause(src),
+        reset_count: src.u32(),
+        panic_line: src.u32(),
+        seq: src.u32(),
+        dirty: src.bool(),
+    }
+}
+
+fn any_board(src: &mut impl Source) -> BoardProfile {
+    match src.below(BoardProfile::MAX + 1) {
+        0 => BoardProfile::AmrSpi,
+        1 => BoardProfile::Cdc,
+        2 => BoardProfile::Teensy,
+        _ => BoardProfile::PiSpi,
+    }
+}
+
+fn any_reset_cause(src: &mut impl Source) -> ResetCause {
+    match src.below(ResetCause::MAX + 1) {
+        0 => ResetCause::Unknown,
+        1 => ResetCause::PowerOn,
+        2 => ResetCause::Pin,
+        3 => ResetCause::IndependentWatchdog,
+        4 => ResetCause::Panic,
+        5 => ResetCause::Software,
+        6 => ResetCause::Brownout,
+        7 => ResetCause::WindowWatchdog,
+        _ => ResetCause::LowPower,
+    }
+}
+
 /// Bitwise equality (NaN payloads and the sign of zero must survive the wire).
 fn same_command(a: &MotorCommand, b: &MotorCommand) -> bool {
     a.timestamp_us == b.timestamp_us
@@ -40,6 +79,7 @@ fn same_command(a: &MotorCommand, b: &MotorCommand) -> bool {
         && a.control_mode == b.control_mode
         && a.enable == b.enable
         && a.seq == b.seq
+        && a.request == b.request
 }
 
 fn same_feedback(a: &MotorFeedback, b: &MotorFeedback) -> bool {
@@ -130,6 +170,26 @@ pub(crate) fn check_decode_feedback_total(src: &mut impl Source) {
     );
 }
 
+/// [`decode_total`] for `decode_info`.
+pub(crate) fn check_decode_info_total(src: &mut impl Source) {
+    decode_total(src, |s, f| encode_info(&any_info(s), f), decode_info);
+}
+
+/// [`decode_total`] for `decode_mcu_frame`, with valid frames of both kinds.
+pub(crate) fn check_decode_mcu_frame_total(src: &mut impl Source) {
+    decode_total(
+        src,
+        |s, f| {
+            if s.bool() {
+                encode_info(&any_info(s), f);
+            } else {
+                encode_feedback(&any_feedback(s), f);
+            }
+        },
+        decode_mcu_frame,
+    );
+}
+
 /// encode → decode gives back the same command, bit for bit; out-of-range modes are refused, never truncated.
 pub(crate) fn check_command_round_trip(src: &mut impl Source) {
     let cmd = any_command(src);
@@ -142,6 +202,7 @@ pub(crate) fn check_command_round_trip(src: &mut impl Source) {
         assert_eq!(r, Err(RejectReason::Decode));
     }
     cover!(src, cmd.left_speed_cmd.is_nan(), "NaN speed round-trips");
+    cover!(src, cmd.request == REQUEST_IDENTITY, "identity requested");
     cover!(src, cmd.control_mode > 0xFF, "out-of-range mode refused");
     cover!(src, usize::from(f[0]) == MAX_COMMAND_LEN, "longest command");
 }
@@ -164,6 +225,29 @@ pub(crate) fn check_feedback_round_trip(src: &mut impl Source) {
         "faults reported"
     );
     cover!(src, fb.mode > 0xFF, "out-of-range mode refused");
+}
+
+/// encode → decode gives back the same info message, through `decode_info` and through
+/// `decode_mcu_frame`; `decode_feedback` refuses the frame as `Version` (no `protocol_version`), and
+/// `decode_info` refuses the feedback frame of any feedback the same way (no `info_version`).
+pub(crate) fn check_info_round_trip(src: &mut impl Source) {
+    let info = any_info(src);
+    let mut f = [0u8; FRAME_LEN];
+    encode_info(&info, &mut f);
+    assert_eq!(decode_info(&f), Ok(info));
+    assert_eq!(decode_mcu_frame(&f), Ok(McuFrame::Info(info)));
+    assert_eq!(decode_feedback(&f), Err(RejectReason::Version));
+    assert_eq!(decode_command(&f), Err(RejectReason::Version));
+    let mut g = [0u8; FRAME_LEN];
+    encode_feedback(&any_feedback(src), &mut g);
+    assert_eq!(decode_info(&g), Err(RejectReason::Version));
+    cover!(src, usize::from(f[0]) == MAX_INFO_LEN, "longest info");
+    cover!(
+        src,
+        info.reset_cause == ResetCause::Panic && info.panic_line > 0,
+        "panic recorded"
+    );
+    cover!(src, info.board == BoardProfile::PiSpi, "last board profile");
 }
 
 /// Flipping any one of the 512 bits of a valid command frame makes it rejected.
@@ -309,6 +393,7 @@ pub(crate) fn sample_command_frame() -> [u8; FRAME_LEN] {
         control_mode: 1,
         enable: true,
         seq: 0xDEAD_BEEF,
+        request: REQUEST_IDENTITY,
     };
     let mut f = [0u8; FRAME_LEN];
     encode_command(&cmd, &mut f);
@@ -365,9 +450,10 @@ pub(crate) fn check_command_field_step(src: &mut impl Source) {
         );
         cover!(
             src,
-            field > command_field::PROTOCOL_VERSION,
-            "unknown field skipped"
+            applied.is_ok() && field == command_field::REQUEST,
+            "request read"
         );
+        cover!(src, field > command_field::REQUEST, "unknown field skipped");
     }
 }
 
@@ -383,8 +469,25 @@ pub(crate) fn check_feedback_field_step(src: &mut impl Source) {
     }
 }
 
-/// Room for one field and up to 4 bytes after it: a field of these messages is at most 6 bytes (a
-/// one-byte key, field numbers being below 16, and a 5-byte varint).
+/// [`field_step`] of the info decode loop, from any info decoded so far.
+pub(crate) fn check_info_field_step(src: &mut impl Source) {
+    let msg = (any_info(src), src.u32());
+    if let Some((field, applied)) = field_step(src, msg, apply_info_field) {
+        cover!(
+            src,
+            applied.is_ok() && field == info_field::RESET_CAUSE,
+            "reset cause read"
+        );
+        cover!(
+            src,
+            applied.is_err() && field == info_field::BOARD,
+            "board refused"
+        );
+    }
+}
+
+/// Room for one field and up to 3 bytes after it: a field of these messages is at most 7 bytes (a
+/// key of one byte for field numbers below 16, two for `McuInfo`'s 16 to 25, and a 5-byte varint).
 const FIELD_BUF: usize = 10;
 
 /// A message decoded so far, with the `protocol_version` read beside it.
@@ -406,6 +509,7 @@ fn with_command_field(
         f::ENABLE => to.0.enable = from.enable,
         f::SEQ => to.0.seq = from.seq,
         f::PROTOCOL_VERSION => to.1 = PROTOCOL_VERSION,
+        f::REQUEST => to.0.request = from.request,
         _ => {}
     }
     to
@@ -431,6 +535,25 @@ fn with_feedback_field(
         f::MODE => to.0.mode = from.mode,
         f::CMD_SEQ => to.0.cmd_seq = from.cmd_seq,
         f::PROTOCOL_VERSION => to.1 = PROTOCOL_VERSION,
+        _ => {}
+    }
+    to
+}
+
+/// The same for info fields (`info_version` kept beside the message, set to [`INFO_VERSION`]).
+fn with_info_field(mut to: Decoded<McuInfo>, from: &McuInfo, field: u32) -> Decoded<McuInfo> {
+    use info_field as f;
+    match field {
+        f::INFO_VERSION => to.1 = INFO_VERSION,
+        f::FW_VERSION => to.0.fw_version = from.fw_version,
+        f::GIT_HASH => to.0.git_hash = from.git_hash,
+        f::BOARD => to.0.board = from.board,
+        f::BUILD_DATE => to.0.build_date = from.build_date,
+        f::RESET_CAUSE => to.0.reset_cause = from.reset_cause,
+        f::RESET_COUNT => to.0.reset_count = from.reset_count,
+        f::PANIC_LINE => to.0.panic_line = from.panic_line,
+        f::SEQ => to.0.seq = from.seq,
+        f::DIRTY => to.0.dirty = from.dirty,
         _ => {}
     }
     to
@@ -464,6 +587,14 @@ const FEEDBACK_FIELDS: FieldCodec<MotorFeedback> = FieldCodec {
     apply: apply_feedback_field,
     with: with_feedback_field,
     same: |a, b| same_feedback(&a.0, &b.0) && a.1 == b.1,
+};
+
+const INFO_FIELDS: FieldCodec<McuInfo> = FieldCodec {
+    write: write_info_field,
+    max: info_field_max,
+    apply: apply_info_field,
+    with: with_info_field,
+    same: |a, b| a == b,
 };
 
 /// The round trip of one field, the induction step of the message round trip: one field of `m`,
@@ -558,6 +689,24 @@ pub(crate) fn check_feedback_field_round_trip(src: &mut impl Source) {
     );
 }
 
+/// [`field_round_trip`] for every info field (every value of its type is in range: the enums
+/// hold only defined values, so the encoder never writes one the decoder refuses).
+pub(crate) fn check_info_field_round_trip(src: &mut impl Source) {
+    use info_field as f;
+    let info = any_info(src);
+    let field = f::ALL[usize::from(src.below(f::ALL.len() as u8))];
+    let state = (any_info(src), src.u32());
+    let (n, applied) = field_round_trip(src, &INFO_FIELDS, &info, field, state, true);
+    assert!(applied.is_ok());
+    cover!(src, n == 0, "default value omitted");
+    cover!(src, n == 7, "longest field");
+    cover!(
+        src,
+        n > 0 && field == f::RESET_CAUSE && info.reset_cause == ResetCause::LowPower,
+        "last reset cause"
+    );
+}
+
 /// A frame made as the encoders make it (any payload of any length at the front of the payload
 /// region, zeros after it, `seal`) is opened to exactly that payload: the same bytes, in place.
 pub(crate) fn check_seal_open(src: &mut impl Source) {
@@ -619,6 +768,12 @@ mod proofs {
         check_feedback_field_round_trip(&mut KaniSource);
     }
 
+    #[kani::proof]
+    #[kani::unwind(11)]
+    fn verify_info_field_round_trip() {
+        check_info_field_round_trip(&mut KaniSource);
+    }
+
     /// With the CRC replaced by a cheap pure function: the property needs only that `open`'s
     /// checksum of the 62 bytes equals the one `seal` stored for the same bytes, true of every
     /// pure function and so of the real CRC (see `model::pure_checksum`).
@@ -652,6 +807,12 @@ mod proofs {
         check_feedback_field_step(&mut KaniSource);
     }
 
+    #[kani::proof]
+    #[kani::unwind(11)]
+    fn verify_info_field_step() {
+        check_info_field_step(&mut KaniSource);
+    }
+
     #[cfg_attr(kani_pending, kani::proof)]
     #[cfg_attr(kani_pending, kani::unwind(66))]
     fn verify_decode_command_total() {
@@ -674,6 +835,26 @@ mod proofs {
     #[cfg_attr(kani_pending, kani::unwind(15))]
     fn verify_feedback_round_trip() {
         check_feedback_round_trip(&mut KaniSource);
+    }
+
+    // Pending like its siblings: the whole message through the decoder. What it states is proven
+    // by `verify_info_field_round_trip` (each field) and `verify_seal_open` (the frame).
+    #[cfg_attr(kani_pending, kani::proof)]
+    #[cfg_attr(kani_pending, kani::unwind(15))]
+    fn verify_info_round_trip() {
+        check_info_round_trip(&mut KaniSource);
+    }
+
+    #[cfg_attr(kani_pending, kani::proof)]
+    #[cfg_attr(kani_pending, kani::unwind(66))]
+    fn verify_decode_info_total() {
+        check_decode_info_total(&mut KaniSource);
+    }
+
+    #[cfg_attr(kani_pending, kani::proof)]
+    #[cfg_attr(kani_pending, kani::unwind(66))]
+    fn verify_decode_mcu_frame_total() {
+        check_decode_mcu_frame_total(&mut KaniSource);
     }
 
     #[cfg_attr(kani_pending, kani::proof)]
@@ -704,6 +885,31 @@ mod twins {
     #[test]
     fn feedback_field_round_trip() {
         Twin::run(0xA3_0011, CASES, check_feedback_field_round_trip).assert_covered(4);
+    }
+
+    #[test]
+    fn info_field_round_trip() {
+        Twin::run(0xA3_0013, CASES, check_info_field_round_trip).assert_covered(3);
+    }
+
+    #[test]
+    fn info_field_step() {
+        Twin::run(0xA3_0014, 200_000, check_info_field_step).assert_covered(4);
+    }
+
+    #[test]
+    fn info_round_trip() {
+        Twin::run(0xA3_0015, CASES, check_info_round_trip).assert_covered(3);
+    }
+
+    #[test]
+    fn decode_info_total() {
+        Twin::run(0xA3_0016, CASES, check_decode_info_total).assert_covered(5);
+    }
+
+    #[test]
+    fn decode_mcu_frame_total() {
+        Twin::run(0xA3_0017, CASES, check_decode_mcu_frame_total).assert_covered(5);
     }
 
     #[test]
@@ -748,7 +954,7 @@ mod twins {
 
     #[test]
     fn command_field_step() {
-        Twin::run(0xA3_0008, 200_000, check_command_field_step).assert_covered(5);
+        Twin::run(0xA3_0008, 200_000, check_command_field_step).assert_covered(6);
     }
 
     #[test]
@@ -768,7 +974,7 @@ mod twins {
 
     #[test]
     fn command_round_trip() {
-        Twin::run(0xA3_0003, CASES, check_command_round_trip).assert_covered(3);
+        Twin::run(0xA3_0003, CASES, check_command_round_trip).assert_covered(4);
     }
 
     #[test]
