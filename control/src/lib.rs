@@ -1,11 +1,12 @@
 //! Fixed-point motor control for the differential-drive base: speed PID, current PI, rate limiter,
-//! kinematics, and the board-agnostic glue the firmware and the simulator share.
+//! kinematics, measurement scaling and the bridge mapping. The board application (`mcu`) composes
+//! these into the firmware's task bodies.
 //!
 //! ```text
-//!  ladder setpoint ─► RateLimiter ─► SpeedPid ─► current ref ─► CurrentPi ─► duty ─► glue::bridge_compare ─► PWM
+//!  ladder setpoint ─► RateLimiter ─► SpeedPid ─► current ref ─► CurrentPi ─► duty ─► bridge::bridge_compare ─► PWM
 //!  (1 kHz, rad/s)      (10 kHz)      (10 kHz)      (A)           (20 kHz)    [-1, 1]
 //!                                        ▲                          ▲
-//!                     glue::SpeedEstimator (encoders)     glue::adc_to_amps (shunt ADC)
+//!                     sense::SpeedEstimator (encoders)    sense::adc_to_amps (shunt ADC)
 //! ```
 //!
 //! Units and number formats (all Q16.16, [`fixed::types::I16F16`], so one multiply costs one
@@ -36,18 +37,20 @@
     )
 )]
 
-pub mod glue;
+pub mod bridge;
 pub mod kinematics;
 pub mod pid;
 pub mod rate;
+pub mod sense;
 
 #[cfg(any(test, kani))]
 mod verification;
 
-pub use glue::{AxisLoop, AxisParams, BridgeCompare, SpeedEstimator};
+pub use bridge::{BridgeCompare, BridgeState};
 pub use kinematics::{DiffDrive, KinematicsError, Twist};
 pub use pid::{AntiWindup, CurrentPi, Pid, PidGains, SpeedPid};
 pub use rate::RateLimiter;
+pub use sense::SpeedEstimator;
 pub use statemachine::Speed;
 
 /// Motor current in amperes, Q16.16.

@@ -6,10 +6,11 @@
 //! bridge mapping and speed estimation never panic or overflow, and the bridge never drives both
 //! high sides.
 
-use crate::glue::{adc_to_amps, bridge_compare, AxisLoop, AxisParams, Liveness, SpeedEstimator};
+use crate::bridge::bridge_compare;
 use crate::kinematics::{DiffDrive, KinematicsError, Twist};
 use crate::pid::{AntiWindup, CurrentPi, Pid, PidGains};
 use crate::rate::RateLimiter;
+use crate::sense::{adc_to_amps, SpeedEstimator};
 use crate::{within, Q};
 use statemachine::harness::Source;
 use statemachine::{assume, cover};
@@ -243,39 +244,6 @@ pub fn speed_estimator_total(src: &mut impl Source) {
     cover!(src, e.total() != 0, "wheel moved");
 }
 
-/// Whole cascade: current reference and duty stay within the configured limits for any inputs.
-pub fn axis_bounded(src: &mut impl Source) {
-    let p = AxisParams {
-        speed: gains(src),
-        current: gains(src),
-        ref_step: q(src),
-        speed_scale: q(src),
-    };
-    assume!(src, p.speed.is_valid() && p.current.is_valid());
-    let mut a = AxisLoop::new(&p, src.u16());
-    let sp = if src.bool() { Some(q(src)) } else { None };
-    let i_ref = a.speed_step(sp, src.u16());
-    let d = a.current_step(q(src));
-    assert!(within(i_ref, p.speed.out_limit));
-    assert!(within(d, Q::ONE) && within(d, p.current.out_limit));
-    if sp.is_none() {
-        assert_eq!(i_ref, Q::ZERO);
-    }
-    cover!(src, i_ref != Q::ZERO, "current demanded");
-}
-
-/// The liveness monitor never panics and fails when a task did not run.
-pub fn liveness_total(src: &mut impl Source) {
-    let mut l = Liveness::<2>::new();
-    let _ = l.check([src.u32(), src.u32()], [src.u32(), src.u32()]);
-    let a = src.u32();
-    let b = src.u32();
-    let first = l.check([a, b], [1, 1]);
-    let second = l.check([a, b], [1, 1]);
-    assert!(!second);
-    cover!(src, first, "both tasks ran");
-}
-
 #[cfg(kani)]
 #[allow(dead_code)]
 mod proofs {
@@ -321,16 +289,6 @@ mod proofs {
     fn verify_speed_estimator_total() {
         super::speed_estimator_total(&mut KaniSource);
     }
-    #[kani::proof]
-    #[kani::unwind(17)]
-    fn verify_axis_bounded() {
-        super::axis_bounded(&mut KaniSource);
-    }
-    #[kani::proof]
-    #[kani::unwind(3)]
-    fn verify_liveness_total() {
-        super::liveness_total(&mut KaniSource);
-    }
 }
 
 #[cfg(test)]
@@ -370,13 +328,5 @@ mod twins {
     #[test]
     fn speed_estimator_total() {
         Twin::run(0xC0_07, CASES, super::speed_estimator_total).assert_covered(1);
-    }
-    #[test]
-    fn axis_bounded() {
-        Twin::run(0xC0_08, CASES, super::axis_bounded).assert_covered(1);
-    }
-    #[test]
-    fn liveness_total() {
-        Twin::run(0xC0_09, CASES, super::liveness_total).assert_covered(1);
     }
 }

@@ -8,7 +8,89 @@ LINE = re.compile(
 )
 
 
-def main(path: str) -> int:
+MODES = ["Normal", "Reduced", "Hold", "Stop", "Brake"]
+
+
+def crc16_ccitt_false(data: bytes) -> int:
+    crc = 0xFFFF
+    for b in data:
+        crc ^= b << 8
+        for _ in range(8):
+            crc = ((crc << 1) ^ 0x1021) if crc & 0x8000 else (crc << 1)
+            crc &= 0xFFFF
+    return crc
+
+
+def decode_feedback(frame: bytes) -> dict:
+    """Decodes a MotorFeedback frame from the wire description (protobuf wire types), not the Rust code."""
+    assert len(frame) == 64
+    if crc16_ccitt_false(frame[:62]) != int.from_bytes(frame[62:], "big"):
+        raise ValueError("CRC")
+    n = frame[0]
+    p, i, out = frame[1:1 + n], 0, {}
+    names = {1: "timestamp_us", 8: "fault_flags", 10: "seq", 11: "mode", 12: "cmd_seq", 13: "version"}
+    while i < len(p):
+        key, i = varint(p, i)
+        field, wt = key >> 3, key & 7
+        if wt == 0:
+            v, i = varint(p, i)
+        elif wt == 5:
+            v, i = int.from_bytes(p[i:i + 4], "little"), i + 4
+        else:
+            raise ValueError(f"wire type {wt}")
+        if field in names:
+            out[names[field]] = v
+    for k in names.values():
+        out.setdefault(k, 0)
+    return out
+
+
+def varint(b: bytes, i: int):
+    v, shift = 0, 0
+    while True:
+        c = b[i]
+        i += 1
+        v |= (c & 0x7F) << shift
+        shift += 7
+        if not c & 0x80:
+            return v, i
+
+
+def check_feedback(path: str, rows: list) -> list:
+    fails = []
+    data = open(path, "rb").read()
+    frames = [data[k:k + 64] for k in range(0, len(data) - 63, 64)]
+    fbs = []
+    for k, f in enumerate(frames):
+        try:
+            fbs.append(decode_feedback(f))
+        except (ValueError, IndexError) as e:
+            fails.append(f"feedback frame {k} does not decode: {e}")
+    if len(fbs) < 40:
+        return fails + [f"only {len(fbs)} feedback frames"]
+    for a, b in zip(fbs, fbs[1:]):
+        if b["seq"] != a["seq"] + 1:
+            fails.append(f"feedback seq {a['seq']} then {b['seq']}")
+            break
+        # One transaction per tick: the MCU's own clock advances by one tick, 1000 µs.
+        if b["timestamp_us"] - a["timestamp_us"] != 1000:
+            fails.append(f"timestamps {a['timestamp_us']} then {b['timestamp_us']} µs")
+            break
+    if any(f["version"] != 1 for f in fbs):
+        fails.append("feedback without protocol_version 1")
+    # The feedback written in a tick reports the mode the trace printed at the previous tick.
+    by_tick = {r["tick"]: r for r in rows}
+    brake_seen = any(MODES[f["mode"]] == "Brake" and f["fault_flags"] & 0x0200 for f in fbs)
+    run_seen = any(MODES[f["mode"]] in ("Normal", "Reduced") for f in fbs)
+    if not (brake_seen and run_seen):
+        fails.append("feedback never reported both a driving mode and BRAKE latched")
+    modes_traced = {r["mode"] for r in by_tick.values()}
+    if not {MODES[f["mode"]] for f in fbs} <= modes_traced:
+        fails.append("feedback reported a mode the trace never showed")
+    return fails
+
+
+def main(path: str, feedback: str) -> int:
     rows = []
     for line in open(path, encoding="utf-8", errors="replace"):
         m = LINE.search(line)
@@ -45,15 +127,17 @@ def main(path: str) -> int:
         modes = [r["mode"] for r in after if r["tick"] < brake_at["tick"]]
         if "Hold" not in modes or "Stop" not in modes:
             fails.append(f"ladder skipped HOLD/STOP on the way down: {modes}")
+    fails += check_feedback(feedback, rows)
     for f in fails:
         print("FAIL:", f)
     if fails:
         return 1
     print(f"qemu: {len(rows)} ticks traced; frames applied; corrupted frame rejected without effect; "
-          f"BRAKE at tick {brake_at['tick']}, the 10th tick after the last valid frame")
-    print("3 passed, 0 failed")
+          f"BRAKE at tick {brake_at['tick']}, the 10th tick after the last valid frame; "
+          f"feedback frames decode with µs time stamps 1000 apart and consecutive sequence numbers")
+    print("4 passed, 0 failed")
     return 0
 
 
 if __name__ == "__main__":
-    sys.exit(main(sys.argv[1]))
+    sys.exit(main(sys.argv[1], sys.argv[2]))

@@ -1,7 +1,8 @@
 #!/usr/bin/env bash
 # Boots the real firmware (feature `qemu`) in QEMU's netduinoplus2 (STM32F405, Cortex-M4), feeds it
 # link frames from a host file through semihosting, and checks its own per-tick trace:
-# frames applied, a corrupted frame rejected without effect, BRAKE at the 10th tick after the link stops.
+# frames applied, a corrupted frame rejected without effect, BRAKE at the 10th tick after the link stops;
+# and the feedback frames it wrote (feedback.bin): CRC, µs time stamps, sequence, mode and fault flags.
 # Needs qemu-system-arm (Debian: apt-get install qemu-system-arm) and python3.
 set -euo pipefail
 cd "$(dirname "$0")/../.."
@@ -15,4 +16,5 @@ python3 firmware/qemu/make_frames.py "$work/frames.bin"
 (cd "$work" && timeout 120 qemu-system-arm -machine netduinoplus2 -cpu cortex-m4 -nographic \
   -monitor none -serial none -semihosting-config enable=on,target=native -kernel "$elf") > "$work/trace.txt"
 cp "$work/trace.txt" target/qemu/trace.txt
-python3 firmware/qemu/check_trace.py "$work/trace.txt"
+cp "$work/feedback.bin" target/qemu/feedback.bin
+python3 firmware/qemu/check_trace.py "$work/trace.txt" "$work/feedback.bin"

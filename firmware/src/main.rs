@@ -1,42 +1,48 @@
-//! Motor-controller firmware for the STM32F407: four hardware-priority RTIC tasks around the pure
-//! `statemachine`, `protocol` and `control` crates.
+//! Motor-controller firmware for the STM32F407: the RTIC shell around the board application
+//! (crate `mcu`). Each task binds its interrupt to one `mcu` body and moves values between the
+//! registers (modules in `board/`) and that body; the simulator runs the same bodies.
 //!
 //! ```text
-//!  priority 4  current_loop   ADC JEOC (TIM1_CC4)  20 kHz  shunt ADC → CurrentPi → TIM1/TIM8 compares
-//!  priority 3  speed_pid      TIM5 update          10 kHz  encoders → RateLimiter → SpeedPid → current ref
-//!  priority 2  spi_dma_done   DMA1 stream 3 TC      1 kHz  frame → decode → ladder → feedback frame
-//!  priority 2  watchdog_tick  TIM2 update           1 kHz  ladder.step(Tick) → bridge (BRAKE now) → IWDG
+//!  priority 5  estop_input    EXTI4 (PD4, both edges)  mcu::EstopInput::edge     bridge braked in the handler
+//!  priority 4  current_loop   ADC JEOC (TIM1_CC4) 20 kHz mcu::CurrentLoop::run    shunts → PI → compares, trip
+//!  priority 3  speed_pid      TIM5 update        10 kHz  mcu::SpeedLoop::run      encoders → ramp → PID → current refs
+//!  priority 2  spi_dma_done   DMA1 stream 3 TC   1 kHz   mcu::LinkTask::on_frame  frame → ladder → feedback frame
+//!  priority 2  watchdog_tick  TIM2 update        1 kHz   mcu::TickTask::run       conditions → tick → bridge → IWDG
 //!  idle        wfi
 //! ```
 //!
-//! The ladder is shared only by the two priority-2 tasks, which never preempt each other, so it
-//! needs no lock (`#[lock_free]`). BRAKE is written to the bridge by whichever of them produced
-//! it, inside that task: no later task has to run for the PWM to stop.
+//! The safety core (`mcu::Safety`: ladder, tick count, trace) is shared only by the two
+//! priority-2 tasks, which never preempt each other, so it needs no lock (`#[lock_free]`). A frame
+//! never moves the drive (INV-8), so only the tick writes the bridge state; the current loop and
+//! the ESTOP handler can only brake it.
 #![no_std]
 #![no_main]
 #![deny(unsafe_code)]
 
 mod board;
-mod emu;
-mod glue;
+mod panic;
 
 use defmt_rtt as _;
-use panic_probe as _;
 
 #[rtic::app(device = stm32f4xx_hal::pac, peripherals = true)]
 mod app {
-    use crate::board::{self, Board, Bridge, CurrentSense, Encoders, Link, Periodic, FRAME_LEN};
-    use crate::glue::{self, Measurements, Runs};
-    use control::glue::{adc_to_amps, bridge_compare, overcurrent, BridgeState, Liveness};
-    use control::{Amps, CurrentPi, RateLimiter, SpeedEstimator, SpeedPid};
-    use rtic::Mutex;
-    use statemachine::{Config, Ladder, Output, Speed};
+    use crate::board::{
+        self, hooks, Board, Bridge, CurrentSense, Encoders, EstopPin, LinkHw, Periodic, TickClock,
+        FRAME_LEN, TUNING,
+    };
+    use mcu::tick::TickInputs;
+    use mcu::{
+        Amps, CurrentLoop, EstopInput, LinkTask, Measurements, Runs, Safety, SpeedLoop, TickTask,
+    };
+    use statemachine::Speed;
     use stm32f4xx_hal::pac;
 
     #[shared]
     struct Shared {
-        /// Both H-bridges (ceiling 4).
+        /// Both H-bridges (ceiling 5).
         bridge: Bridge,
+        /// The local ESTOP input's latch (ceiling 5).
+        estop: EstopInput,
         /// What the ladder last allowed: wheel setpoints, or `None` in BRAKE (ceiling 3).
         setpoint: Option<[Speed; 2]>,
         /// Current references from the speed loop to the current loop (ceiling 4).
@@ -45,29 +51,26 @@ mod app {
         meas: Measurements,
         /// Run counters of the control tasks, checked before each IWDG refresh (ceiling 4).
         runs: Runs,
-        /// The safety ladder, shared by the two priority-2 tasks only.
+        /// Ladder, tick count and trace, shared by the two priority-2 tasks only.
         #[lock_free]
-        ladder: Ladder,
+        safety: Safety,
     }
 
     #[local]
     struct Local {
         adc: CurrentSense,
-        current_pis: [CurrentPi; 2],
-        adc_offsets: [u16; 2],
+        current: CurrentLoop,
         encoders: Encoders,
         speed_timer: Periodic<pac::TIM5>,
-        limiters: [RateLimiter; 2],
-        speed_pids: [SpeedPid; 2],
-        estimators: [SpeedEstimator; 2],
-        link: Link,
-        feedback_seq: u32,
+        speed: SpeedLoop,
+        link_hw: LinkHw,
+        link: LinkTask,
+        clock: TickClock,
         tick_timer: Periodic<pac::TIM2>,
+        tick: TickTask,
         pins: board::Pins,
+        estop_pin: EstopPin,
         iwdg: board::Iwdg,
-        liveness: Liveness<2>,
-        ticks: u32,
-        emu: crate::emu::Emu,
     }
 
     #[init(local = [
@@ -75,46 +78,47 @@ mod app {
         tx_buf: [[u8; FRAME_LEN]; 2] = [[0; FRAME_LEN]; 2],
     ])]
     fn init(cx: init::Context) -> (Shared, Local) {
+        let cause = crate::panic::reset_cause(&cx.device.RCC);
         let (b, iwdg, dbg) = board::init(cx.device, cx.local.rx_buf, cx.local.tx_buf);
         let Board {
             bridge,
             encoders,
             adc,
             link,
+            estop,
             tick,
             speed,
             pins,
         } = b;
-        let counts = encoders.read();
-        let p = glue::AXIS;
         let iwdg = board::Iwdg::start(iwdg, &dbg);
-        defmt::info!("firmware up: ladder latched in BRAKE until the host arms it");
+        defmt::info!(
+            "firmware up after reset ({}): BRAKE latched until the host arms it",
+            cause
+        );
         (
             Shared {
                 bridge,
+                estop: EstopInput::new(),
                 setpoint: None,
                 current_ref: [Amps::ZERO; 2],
                 meas: Measurements::default(),
                 runs: Runs::default(),
-                ladder: Ladder::new(Config::DEFAULT),
+                safety: Safety::new(TUNING.ladder),
             },
             Local {
                 adc,
-                current_pis: [CurrentPi::new(p.current); 2],
-                adc_offsets: [glue::ADC_ZERO; 2],
+                current: CurrentLoop::new(&TUNING, [TUNING.adc_zero; 2]),
+                speed: SpeedLoop::new(&TUNING, encoders.read()),
                 encoders,
                 speed_timer: speed,
-                limiters: [RateLimiter::new(p.ref_step, Speed::ZERO); 2],
-                speed_pids: [SpeedPid::new(p.speed); 2],
-                estimators: counts.map(|c| SpeedEstimator::new(c, p.speed_scale)),
-                link,
-                feedback_seq: 0,
+                link_hw: link,
+                link: LinkTask::new(),
+                clock: TickClock,
                 tick_timer: tick,
+                tick: TickTask::new(&TUNING),
                 pins,
+                estop_pin: estop,
                 iwdg,
-                liveness: Liveness::new(),
-                ticks: 0,
-                emu: crate::emu::Emu::open(),
             },
         )
     }
@@ -126,208 +130,93 @@ mod app {
         }
     }
 
-    /// Current loop. Priority 4 (highest), 20 kHz: the ADC injected end-of-conversion interrupt,
-    /// triggered by TIM1_CC4 once per PWM period, so every sample is taken at the same point of
-    /// the switching cycle. Also watches the break flag (overcurrent comparator on BKIN).
-    #[task(binds = ADC, priority = 4, shared = [bridge, current_ref, meas, runs],
-           local = [adc, current_pis, adc_offsets])]
-    fn current_loop(cx: current_loop::Context) {
-        let raw = cx.local.adc.read();
-        let offsets = *cx.local.adc_offsets;
-        let amps = [
-            adc_to_amps(raw[0], offsets[0], glue::AMPS_PER_COUNT),
-            adc_to_amps(raw[1], offsets[1], glue::AMPS_PER_COUNT),
-        ];
-        let soft_trip = amps.iter().any(|i| overcurrent(*i, glue::TRIP_AMPS));
-        let mut current_ref = cx.shared.current_ref;
-        let refs = current_ref.lock(|r| *r);
-        let pis = cx.local.current_pis;
-        let mut bridge = cx.shared.bridge;
-        let hard_trip = bridge.lock(|b| b.tripped(false));
-        let tripped = soft_trip || hard_trip;
-        bridge.lock(|b| {
-            if tripped {
-                // Software backstop of the hardware break: PWM off in this very period.
-                b.apply(BridgeState::Brake);
-            }
-            if b.state() == BridgeState::Run {
-                let l = pis[0].step(refs[0], amps[0]);
-                let r = pis[1].step(refs[1], amps[1]);
-                b.set(
-                    bridge_compare(l, board::PWM_ARR),
-                    bridge_compare(r, board::PWM_ARR),
-                );
-            } else {
-                pis[0].reset(amps[0]);
-                pis[1].reset(amps[1]);
-            }
-        });
-        let mut meas = cx.shared.meas;
-        meas.lock(|m| {
-            m.currents = amps;
-            m.overcurrent |= tripped;
-        });
-        let mut runs = cx.shared.runs;
-        runs.lock(|r| r.current = r.current.wrapping_add(1));
+    /// ESTOP input. Priority 5 (highest), on both edges of PD4: a press brakes the bridge in this
+    /// handler, before any other task runs; the next tick latches ESTOP in the ladder.
+    #[task(binds = EXTI4, priority = 5, shared = [bridge, estop], local = [estop_pin])]
+    fn estop_input(cx: estop_input::Context) {
+        cx.local.estop_pin.clear();
+        let pressed = cx.local.estop_pin.pressed();
+        (cx.shared.bridge, cx.shared.estop).lock(|b, e| e.edge(b, pressed));
     }
 
-    /// Speed loop. Priority 3, 10 kHz: TIM5 update. Encoders → speed estimate → rate limiter →
-    /// speed PID → current references for the current loop.
+    /// Current loop. Priority 4, 20 kHz: the ADC injected end-of-conversion interrupt, triggered by
+    /// TIM1_CC4 once per PWM period, so every sample is taken at the same point of the cycle.
+    #[task(binds = ADC, priority = 4, shared = [bridge, current_ref, meas, runs],
+           local = [adc, current])]
+    fn current_loop(mut cx: current_loop::Context) {
+        let raw = cx.local.adc.read();
+        let refs = cx.shared.current_ref.lock(|r| *r);
+        let current = cx.local.current;
+        let s = cx.shared.bridge.lock(|b| current.run(b, raw, refs));
+        cx.shared.meas.lock(|m| m.record_current(&s));
+        cx.shared
+            .runs
+            .lock(|r| r.current = r.current.wrapping_add(1));
+    }
+
+    /// Speed loop. Priority 3, 10 kHz: TIM5 update.
     #[task(binds = TIM5, priority = 3, shared = [setpoint, current_ref, meas, runs],
-           local = [speed_timer, encoders, limiters, speed_pids, estimators])]
-    fn speed_pid(cx: speed_pid::Context) {
+           local = [speed_timer, encoders, speed])]
+    fn speed_pid(mut cx: speed_pid::Context) {
         cx.local.speed_timer.clear();
         let counts = cx.local.encoders.read();
-        let mut setpoint = cx.shared.setpoint;
-        let sp = setpoint.lock(|s| *s);
-        let mut speeds = [Speed::ZERO; 2];
-        let mut refs = [Amps::ZERO; 2];
-        for i in 0..2 {
-            let (Some(est), Some(lim), Some(pid), Some(c)) = (
-                cx.local.estimators.get_mut(i),
-                cx.local.limiters.get_mut(i),
-                cx.local.speed_pids.get_mut(i),
-                counts.get(i),
-            ) else {
-                continue;
-            };
-            let w = est.update(*c);
-            let r = match sp.and_then(|s| s.get(i).copied()) {
-                Some(target) => pid.step(lim.step(target), w),
-                None => {
-                    lim.reset(Speed::ZERO);
-                    pid.reset(w);
-                    Amps::ZERO
-                }
-            };
-            if let (Some(s), Some(o)) = (speeds.get_mut(i), refs.get_mut(i)) {
-                *s = w;
-                *o = r;
-            }
-        }
-        let mut current_ref = cx.shared.current_ref;
-        current_ref.lock(|c| *c = refs);
-        let [el, er] = &*cx.local.estimators;
-        let totals = [el.total(), er.total()];
-        let mut meas = cx.shared.meas;
-        meas.lock(|m| {
-            m.speeds = speeds;
-            m.encoders = totals;
-        });
-        let mut runs = cx.shared.runs;
-        runs.lock(|r| r.speed = r.speed.wrapping_add(1));
-        // The emulator has no ADC trigger: run the current loop from here (once per speed sample).
-        #[cfg(feature = "qemu")]
-        rtic::pend(pac::Interrupt::ADC);
+        let sp = cx.shared.setpoint.lock(|s| *s);
+        let s = cx.local.speed.run(counts, sp);
+        cx.shared.current_ref.lock(|c| *c = s.refs);
+        cx.shared.meas.lock(|m| m.record_speed(&s));
+        cx.shared.runs.lock(|r| r.speed = r.speed.wrapping_add(1));
+        hooks::after_speed_sample();
     }
 
     /// Link frame received. Priority 2, once per SPI transaction (1 kHz from the host): DMA1
-    /// stream 3 transfer complete. Decodes the frame (CRC, protobuf, version), feeds the ladder
-    /// (`Event::Frame` or `Event::Rejected`), applies the result, and prepares the next feedback.
-    #[task(binds = DMA1_STREAM3, priority = 2, shared = [ladder, bridge, setpoint, meas],
-           local = [link, feedback_seq, emu])]
-    fn spi_dma_done(cx: spi_dma_done::Context) {
-        #[cfg(not(feature = "qemu"))]
-        let frame = cx.local.link.take_rx();
-        #[cfg(feature = "qemu")]
-        let frame = cx.local.emu.next_frame();
-        let Some(frame) = frame else {
-            #[cfg(feature = "qemu")]
-            {
-                let out = cx.shared.ladder.output();
-                let ticks = cx.shared.ladder.counters().ticks;
-                crate::emu::maybe_exit(cx.local.emu, ticks, &out);
-            }
+    /// stream 3 transfer complete.
+    #[task(binds = DMA1_STREAM3, priority = 2, shared = [safety, meas],
+           local = [link_hw, link, clock])]
+    fn spi_dma_done(mut cx: spi_dma_done::Context) {
+        let Some(frame) = cx.local.link_hw.take_rx() else {
             return;
         };
-        let out = glue::on_frame(cx.shared.ladder, &frame);
-        apply(&out, cx.shared.bridge, cx.shared.setpoint);
-        let mut meas = cx.shared.meas;
-        let m = meas.lock(|m| *m);
-        let seq = *cx.local.feedback_seq;
-        *cx.local.feedback_seq = seq.wrapping_add(1);
-        let mut fb = [0u8; FRAME_LEN];
-        glue::feedback(
-            &m,
-            &out,
-            seq,
-            cx.shared.ladder.last_valid().and_then(|s| s.seq),
-            &mut fb,
+        let safety = cx.shared.safety;
+        let (count, pending) = cx.local.clock.read();
+        let now = safety.micros(
+            count,
+            pending,
+            board::timers::TICK_COUNTS,
+            TUNING.us_per_tick(),
         );
-        cx.local.link.put_tx(&fb);
+        let m = cx.shared.meas.lock(|m| *m);
+        let mut fb = [0u8; FRAME_LEN];
+        cx.local.link.on_frame(safety, &frame, &m, now, &mut fb);
+        cx.local.link_hw.put_tx(&fb);
     }
 
-    /// Watchdog tick. Priority 2, 1 kHz: TIM2 update, the ladder's time base. Reports board
-    /// conditions, steps the ladder, writes BRAKE to the bridge in this same task, and refreshes
-    /// the IWDG only if both control loops ran at their rates since the last tick.
-    #[task(binds = TIM2, priority = 2, shared = [ladder, bridge, setpoint, meas, runs],
-           local = [tick_timer, pins, iwdg, liveness, ticks])]
-    fn watchdog_tick(cx: watchdog_tick::Context) {
+    /// Watchdog tick. Priority 2, 1 kHz: TIM2 update, the ladder's time base.
+    #[task(binds = TIM2, priority = 2, shared = [safety, bridge, estop, setpoint, meas, runs],
+           local = [tick_timer, tick, pins, iwdg])]
+    fn watchdog_tick(mut cx: watchdog_tick::Context) {
         cx.local.tick_timer.clear();
-        let ladder = cx.shared.ladder;
-        let mut meas = cx.shared.meas;
-        let m = meas.lock(|m| {
-            let snapshot = *m;
-            m.overcurrent = false;
-            snapshot
-        });
-        let inputs = glue::Inputs {
-            overcurrent: m.overcurrent,
-            driver_fault: cx.local.pins.n_fault.is_low(),
-            thermal_warning: cx.local.pins.n_otw.is_low(),
-            speeds: m.speeds,
+        let pins = cx.local.pins;
+        let inputs = TickInputs {
+            meas: cx.shared.meas.lock(|m| m.take_for_tick()),
+            driver_fault: pins.driver_fault(),
+            thermal_warning: pins.thermal_warning(),
+            estop: cx.shared.estop.lock(|e| e.poll(estop_level())),
+            runs: cx.shared.runs.lock(|r| *r),
         };
-        #[cfg(feature = "qemu")]
-        let inputs = glue::Inputs {
-            driver_fault: false,
-            thermal_warning: false,
-            ..inputs
-        };
-        let out = glue::on_tick(ladder, &inputs);
-        let mut bridge = cx.shared.bridge;
-        apply(&out, &mut bridge, cx.shared.setpoint);
-        // Holding brake follows the ladder: released only while the speed loop drives.
-        if out.mode == statemachine::Mode::Brake {
-            cx.local.pins.brake_release.set_low();
-        } else {
-            cx.local.pins.brake_release.set_high();
-        }
-        if out.mode == statemachine::Mode::Brake {
-            // While braked, clear the break flag once per tick: the break input is level
-            // sensitive, so the flag comes straight back (and the current loop reports the
-            // overcurrent again) for as long as the comparator holds BKIN low.
-            bridge.lock(|b| b.tripped(true));
-        }
-        let mut runs = cx.shared.runs;
-        let r = runs.lock(|r| *r);
-        if cx
-            .local
-            .liveness
-            .check([r.current, r.speed], glue::MIN_RUNS_PER_TICK)
-        {
+        let safety = cx.shared.safety;
+        let o = cx.local.tick.run(safety, &inputs);
+        (cx.shared.bridge, cx.shared.estop).lock(|b, e| o.drive(b, e));
+        cx.shared.setpoint.lock(|s| *s = o.setpoint());
+        pins.set_brake_release(o.brake_release);
+        if o.feed_watchdog {
             cx.local.iwdg.feed();
         }
-        *cx.local.ticks = cx.local.ticks.wrapping_add(1);
-        #[cfg(feature = "qemu")]
-        {
-            crate::emu::trace(*cx.local.ticks, &out, &*ladder);
-            // The emulator has no SPI: one link transaction per tick, from the host file.
-            rtic::pend(pac::Interrupt::DMA1_STREAM3);
-        }
+        hooks::after_tick(safety.ticks(), &o.out, safety);
     }
 
-    /// Applies a ladder output: the bridge state at once, and the setpoints for the speed loop.
-    fn apply(
-        out: &Output,
-        mut bridge: impl Mutex<T = Bridge>,
-        mut setpoint: impl Mutex<T = Option<[Speed; 2]>>,
-    ) {
-        let state = control::glue::bridge_state(&out.drive);
-        bridge.lock(|b| b.apply(state));
-        let sp = match out.drive {
-            statemachine::Drive::Run { left, right } => Some([left, right]),
-            statemachine::Drive::Brake => None,
-        };
-        setpoint.lock(|s| *s = sp);
+    /// The ESTOP input's level for the tick (the pin is owned by its handler; reading the level
+    /// is a plain GPIO read).
+    fn estop_level() -> bool {
+        board::estop_pressed()
     }
 }

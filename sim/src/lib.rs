@@ -11,8 +11,8 @@
     clippy::needless_range_loop
 )]
 
+pub mod board;
 pub mod host;
-pub mod mcu;
 pub mod plant;
 pub mod report;
 pub mod rng;

@@ -14,8 +14,8 @@ use std::time::Instant;
 use protocol::amr::FRAME_LEN;
 use statemachine::{FaultFlags, Mode};
 
+use crate::board::SimBoard;
 use crate::host::HostModel;
-use crate::mcu::{Mcu, McuParams};
 use crate::plant::{BridgeDrive, Plant};
 use crate::rng::Rng;
 use crate::scenario::{Fault, Request, Scenario};
@@ -24,8 +24,6 @@ use crate::scenario::{Fault, Request, Scenario};
 pub const STEP_S: f64 = 50e-6;
 /// SPI transfer time of one frame: 64 bytes at 2 MHz.
 pub const TRANSFER_S: f64 = FRAME_LEN as f64 * 8.0 / 2.0e6;
-/// MCU clock at the start of a run (it booted before the scenario), µs.
-pub const MCU_EPOCH_US: f64 = 1_000_000.0;
 /// Host clock at the start of a run, µs.
 pub const HOST_EPOCH_US: f64 = 50_000_000.0;
 
@@ -83,8 +81,11 @@ pub struct Summary {
     pub hold_ms: Option<f64>,
     /// First STOP after the onset, ms after it.
     pub stop_ms: Option<f64>,
-    /// First BRAKE after the onset, ms after it.
+    /// First BRAKE of the ladder after the onset, ms after it.
     pub brake_ms: Option<f64>,
+    /// First step after the onset with both bridges braked (low sides on), ms after it: the
+    /// current loop and the ESTOP handler brake the bridge before the ladder's next tick.
+    pub bridge_brake_ms: Option<f64>,
     /// First comm-loss BRAKE: time since the last valid frame, ms.
     pub brake_after_last_frame_ms: Option<f64>,
     /// Distance from the onset until standstill, m.
@@ -248,16 +249,22 @@ pub fn run<H: HostModel>(
     let host_clock = |t: f64| (HOST_EPOCH_US + t * 1e6 * host_rate).max(0.0) as u64;
     let mut rng = Rng::new(sc.seed);
     let mut plant = Plant::new(sc.plant);
-    let params = McuParams::default_for(sc.plant.counts_per_rev);
+    let tuning = mcu::tuning::Tuning {
+        counts_per_rev: sc.plant.counts_per_rev,
+        speed_scale: control::sense::speed_scale(
+            sc.plant.counts_per_rev,
+            mcu::tuning::AMR.speed_hz,
+        )
+        .unwrap_or(mcu::tuning::AMR.speed_scale),
+        ..mcu::tuning::AMR
+    };
     let counters = |pl: &Plant| [pl.encoder_counter(0), pl.encoder_counter(1)];
-    let mut mcu = Mcu::new(params, counters(&plant));
-    let mut mcu_boot = 0.0f64;
-    let mut mcu_epoch = MCU_EPOCH_US;
-    let mcu_clock =
-        |t: f64, boot: f64, epoch: f64| (epoch + (t - boot) * 1e6 * mcu_rate).max(0.0) as u64;
+    let mut mcu = SimBoard::new(tuning, counters(&plant));
+    let mut last_feed = 0.0f64;
     // The stamp of the feedback in the MCU's tx buffer: (MCU µs, true time).
     let mut stamp: Option<(u64, f64)> = None;
     let mut frozen_since: Option<f64> = None;
+    let mut freeze_done = false;
 
     let mut requests: Vec<Request> = sc.requests.clone();
     requests.sort_by(|a, b| a.at().total_cmp(&b.at()));
@@ -282,7 +289,6 @@ pub fn run<H: HostModel>(
     let mut clock_err_n = 0u64;
     let mut seed_err_sum = 0.0;
     let mut seed_err_n = 0u64;
-    let mut estop_state = false;
     let mut last_progress = 0.0;
 
     if let Some(w) = trace.as_deref_mut() {
@@ -325,8 +331,8 @@ pub fn run<H: HostModel>(
         let mut estop = false;
         for f in &sc.faults {
             match *f {
-                Fault::McuFreeze { at_s, iwdg_ms }
-                    if frozen_since.is_none() && t >= at_s && t < at_s + iwdg_ms * 1e-3 =>
+                Fault::McuFreeze { at_s, .. }
+                    if frozen_since.is_none() && !freeze_done && t >= at_s =>
                 {
                     frozen_since = Some(t);
                 }
@@ -352,7 +358,7 @@ pub fn run<H: HostModel>(
                 _ => {}
             }
         }
-        if let Some(since) = frozen_since {
+        if frozen_since.is_some() {
             let iwdg = sc
                 .faults
                 .iter()
@@ -361,14 +367,14 @@ pub fn run<H: HostModel>(
                     _ => None,
                 })
                 .unwrap_or(0.02);
-            if t >= since + iwdg {
-                // Independent watchdog reset: the firmware restarts, ladder latched in POWER_ON.
+            if t >= last_feed + iwdg {
+                // The independent watchdog was not refreshed for its timeout: the MCU resets and
+                // restarts latched in BRAKE (POWER_ON). One freeze per scenario.
                 frozen_since = None;
-                mcu = Mcu::new(params, counters(&plant));
-                mcu_boot = t;
-                mcu_epoch = 0.0;
+                freeze_done = true;
+                mcu = SimBoard::new(tuning, counters(&plant));
+                last_feed = t;
                 stamp = None;
-                // Frozen forever after this scenario's single freeze: mark it consumed.
             }
         }
         let frozen = frozen_since.is_some();
@@ -378,9 +384,8 @@ pub fn run<H: HostModel>(
             if !tr.mcu_done && tr.cs_rise <= t {
                 tr.mcu_done = true;
                 if !frozen && !link_cut {
-                    let stamp_us = mcu_clock(tr.cs_rise, mcu_boot, mcu_epoch) + 10;
-                    let accepted = mcu.on_frame(&tr.tx, stamp_us);
-                    stamp = Some((stamp_us, tr.cs_rise + 10e-6 / mcu_rate));
+                    let (accepted, stamp_us) = mcu.on_frame(&tr.tx);
+                    stamp = Some((u64::from(stamp_us), t));
                     if accepted {
                         last_valid_t = Some(tr.cs_rise);
                         if tr.corrupted {
@@ -495,13 +500,14 @@ pub fn run<H: HostModel>(
         ];
         let mut ticked = false;
         if !frozen {
-            if estop != estop_state {
-                estop_state = estop;
-                mcu.on_estop(estop);
+            mcu.set_estop(estop);
+            let rep = mcu.step(counts, shunt);
+            ticked = rep.ticked;
+            if rep.fed_watchdog {
+                last_feed = t;
             }
-            ticked = mcu.step(counts, shunt).ticked;
         }
-        plant.step(dt, mcu.bridge, [0.0; 2]);
+        plant.step(dt, mcu.bridge.drive(), [0.0; 2]);
 
         // Measurements.
         let out = mcu.out;
@@ -527,6 +533,14 @@ pub fn run<H: HostModel>(
             prev_mode = out.mode;
         }
         if let Some(o) = onset {
+            let braked = mcu
+                .bridge
+                .drive()
+                .iter()
+                .all(|d| matches!(d, BridgeDrive::Short));
+            if t >= o && braked && s.bridge_brake_ms.is_none() {
+                s.bridge_brake_ms = Some((t - o) * 1e3);
+            }
             if t >= o && odo_at_onset.is_none() {
                 odo_at_onset = Some(plant.odometer);
                 s.speed_at_onset = Some(plant.v);
@@ -565,7 +579,8 @@ pub fn run<H: HostModel>(
             if let Some(w) = trace.as_deref_mut() {
                 if tick_index % u64::from(sc.trace_every_ms) == 0 {
                     let est = mcu.speed_estimate();
-                    let brake = matches!(mcu.bridge[0], BridgeDrive::Short);
+                    let brake = matches!(mcu.bridge.drive()[0], BridgeDrive::Short);
+                    let duty = mcu.duty();
                     writeln!(
                         w,
                         "{:.4},{},{},{:#06x},{:.4},{:.4},{:.4},{:.4},{:.4},{:.4},{:.3},{:.3},{:.3},{:.3},{:.4},{:.4},{},{:.4},{:.4},{:.4},{:.4},{:.4},{},{},{},{},{}",
@@ -583,8 +598,8 @@ pub fn run<H: HostModel>(
                         est[1],
                         mcu.measured[0],
                         mcu.measured[1],
-                        mcu.duty[0],
-                        mcu.duty[1],
+                        duty[0],
+                        duty[1],
                         u8::from(brake),
                         plant.v,
                         plant.w,
@@ -594,7 +609,7 @@ pub fn run<H: HostModel>(
                         s.frames_sent,
                         s.corrupted_sent,
                         s.corrupted_applied,
-                        mcu.ladder.counters().rejected_total(),
+                        mcu.safety().ladder().counters().rejected_total(),
                         if clock_err_n > 0 { format!("{:.2}", clock_err_sum / clock_err_n as f64) } else { String::new() },
                     )?;
                 }
@@ -618,9 +633,9 @@ pub fn run<H: HostModel>(
     s.wall_s = wall.elapsed().as_secs_f64();
     s.final_mode = mode_name(mcu.out.mode).to_string();
     s.final_v = plant.v;
-    s.rejected_total = u64::from(mcu.ladder.counters().rejected_total());
-    s.brake_entries = u64::from(mcu.ladder.counters().brake_entries);
-    s.rearms = u64::from(mcu.ladder.counters().rearms);
+    s.rejected_total = u64::from(mcu.safety().ladder().counters().rejected_total());
+    s.brake_entries = u64::from(mcu.safety().ladder().counters().brake_entries);
+    s.rearms = u64::from(mcu.safety().ladder().counters().rearms);
     if clock_err_n > 0 {
         s.clock_err_final_us = Some(clock_err_sum / clock_err_n as f64);
     }

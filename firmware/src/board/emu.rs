@@ -1,0 +1,132 @@
+//! Emulator support (feature `qemu`): QEMU's `netduinoplus2` models neither SPI slave mode, DMA nor
+//! the ADC trigger, so the link is a pair of host files read and written by semihosting, the
+//! speed loop pends the current loop, and the tick pends the link task and prints a trace line.
+//!
+//! `frames.bin` in QEMU's working directory: one record per watchdog tick,
+//! `tag (1 byte) ‖ frame (FRAME_LEN bytes)`; tag 1 = a transaction carrying that frame, tag 0 = no
+//! transaction in this tick. End of file = the host stopped sending.
+//! `feedback.bin`: every feedback frame the firmware wrote for the next transaction, in order
+//! (what the host would have clocked out on MISO).
+
+use super::FRAME_LEN;
+use core::fmt::Write;
+use core::sync::atomic::{AtomicBool, AtomicU32, Ordering};
+use cortex_m_semihosting::{debug, hio, syscall};
+use statemachine::{Drive, Output};
+use stm32f4xx_hal::pac;
+
+/// Ticks to keep tracing after the file ended and BRAKE latched, before exiting QEMU.
+const TAIL_TICKS: u32 = 15;
+
+/// Set once `frames.bin` has ended.
+static ENDED: AtomicBool = AtomicBool::new(false);
+/// The tick at which the file had ended with BRAKE held (0 = not yet).
+static ENDED_AT: AtomicU32 = AtomicU32::new(0);
+
+fn open(name: &[u8], mode: usize) -> Option<usize> {
+    // SAFETY: SYS_OPEN reads the NUL-terminated name (length excludes the NUL) and returns a
+    // handle or -1. No memory is written.
+    let fd = unsafe { syscall!(OPEN, name.as_ptr(), mode, name.len().saturating_sub(1)) };
+    (fd != usize::MAX).then_some(fd)
+}
+
+/// The emulated link: frames in from `frames.bin`, feedback out to `feedback.bin`.
+pub struct EmuLink {
+    rx: Option<usize>,
+    tx: Option<usize>,
+}
+
+impl EmuLink {
+    /// Opens both files (the peripherals are taken so the board init is the same as on the board).
+    pub fn new(
+        _spi: pac::SPI2,
+        _dma: pac::DMA1,
+        _rx: &'static mut [[u8; FRAME_LEN]; 2],
+        _tx: &'static mut [[u8; FRAME_LEN]; 2],
+        _rcc: &mut pac::RCC,
+    ) -> Self {
+        Self {
+            rx: open(b"frames.bin\0", 1),   // "rb"
+            tx: open(b"feedback.bin\0", 5), // "wb"
+        }
+    }
+
+    /// The next transaction's frame, `None` for a tick without one or after the end of the file.
+    pub fn take_rx(&mut self) -> Option<[u8; FRAME_LEN]> {
+        let fd = self.rx?;
+        let mut rec = [0u8; 1 + FRAME_LEN];
+        // SAFETY: SYS_READ writes at most `rec.len()` bytes into `rec` and returns how many it
+        // did not read (0 = all).
+        let left = unsafe { syscall!(READ, fd, rec.as_mut_ptr(), rec.len()) };
+        if left != 0 {
+            self.rx = None;
+            ENDED.store(true, Ordering::Relaxed);
+            return None;
+        }
+        let (tag, body) = rec.split_first()?;
+        if *tag != 1 {
+            return None;
+        }
+        let mut frame = [0u8; FRAME_LEN];
+        frame.copy_from_slice(body);
+        Some(frame)
+    }
+
+    /// Appends the feedback frame to `feedback.bin`.
+    pub fn put_tx(&mut self, frame: &[u8; FRAME_LEN]) {
+        if let Some(fd) = self.tx {
+            // SAFETY: SYS_WRITE reads `frame.len()` bytes from `frame`; nothing is written.
+            let _ = unsafe { syscall!(WRITE, fd, frame.as_ptr(), frame.len()) };
+        }
+    }
+}
+
+/// The emulator's stand-ins for the hardware triggers.
+pub mod hooks {
+    use super::*;
+
+    /// The emulator has no ADC trigger: run the current loop once per speed sample.
+    pub fn after_speed_sample() {
+        rtic::pend(pac::Interrupt::ADC);
+    }
+
+    /// Prints one trace line, pends the link task (one transaction per tick from the host file),
+    /// and exits QEMU a few ticks after the file ended and BRAKE latched.
+    pub fn after_tick(tick: u32, out: &Output, safety: &mcu::Safety) {
+        let (l, r) = match out.drive {
+            Drive::Run { left, right } => (left, right),
+            Drive::Brake => (statemachine::Speed::ZERO, statemachine::Speed::ZERO),
+        };
+        let c = safety.ladder().counters();
+        if let Ok(mut o) = hio::hstdout() {
+            let _ = writeln!(
+                o,
+                "tick={} mode={:?} age={} drive={} left={} right={} valid={} rejected={} faults={:#06x}",
+                tick,
+                out.mode,
+                out.age,
+                if matches!(out.drive, Drive::Brake) { "BRAKE" } else { "RUN" },
+                l,
+                r,
+                c.valid_frames,
+                c.rejected_total(),
+                out.faults.0,
+            );
+        }
+        rtic::pend(pac::Interrupt::DMA1_STREAM3);
+        if !ENDED.load(Ordering::Relaxed) || !matches!(out.drive, Drive::Brake) {
+            ENDED_AT.store(0, Ordering::Relaxed);
+            return;
+        }
+        let since = match ENDED_AT.load(Ordering::Relaxed) {
+            0 => {
+                ENDED_AT.store(tick, Ordering::Relaxed);
+                tick
+            }
+            t => t,
+        };
+        if tick.wrapping_sub(since) >= TAIL_TICKS {
+            debug::exit(debug::EXIT_SUCCESS);
+        }
+    }
+}

@@ -1,0 +1,88 @@
+//! `spi_dma_done` (priority 2, once per link transaction): the received frame → decode → ladder
+//! event, and the feedback frame the next transaction sends back.
+//!
+//! A frame never moves the drive (the tick is the only event that changes the setpoint, INV-8),
+//! so this task does not touch the bridge: the next tick applies whatever the ladder decided.
+
+use crate::safety::Safety;
+use crate::Measurements;
+use protocol::amr::{decode_command, encode_feedback, MotorFeedback, FRAME_LEN};
+use statemachine::Output;
+
+/// The link task's own state: the feedback sequence and the last accepted command's sequence.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct LinkTask {
+    seq: u32,
+    cmd_seq: u32,
+}
+
+impl LinkTask {
+    /// Before the first frame.
+    pub const fn new() -> Self {
+        Self { seq: 0, cmd_seq: 0 }
+    }
+
+    /// One transaction: hands the received frame to the ladder, then writes the next feedback
+    /// frame into `tx`, stamped `now_us` (µs since boot, [`Safety::micros`]).
+    pub fn on_frame(
+        &mut self,
+        safety: &mut Safety,
+        frame: &[u8; FRAME_LEN],
+        meas: &Measurements,
+        now_us: u32,
+        tx: &mut [u8; FRAME_LEN],
+    ) -> Output {
+        let out = self.receive(safety, frame);
+        self.feedback(&out, meas, now_us, tx);
+        out
+    }
+
+    /// Decode, validate and step the ladder: the received-frame unit of the budget (CRC, protobuf,
+    /// validation, ladder step). Not inlined, so the budget report can count it as one unit.
+    #[inline(never)]
+    pub fn receive(&mut self, safety: &mut Safety, frame: &[u8; FRAME_LEN]) -> Output {
+        let decoded = decode_command(frame);
+        let seq = decoded.as_ref().map_or(0, |c| c.seq);
+        let before = safety.ladder().counters().valid_frames;
+        let out = safety.step(protocol::event_from(decoded.map(|c| c.to_command())));
+        if safety.ladder().counters().valid_frames != before {
+            self.cmd_seq = seq;
+        }
+        out
+    }
+
+    /// Builds the feedback frame for the next transaction. Not inlined, for the budget report.
+    #[inline(never)]
+    pub fn feedback(
+        &mut self,
+        out: &Output,
+        m: &Measurements,
+        now_us: u32,
+        tx: &mut [u8; FRAME_LEN],
+    ) {
+        self.seq = self.seq.wrapping_add(1);
+        let [sl, sr] = m.speeds;
+        let [il, ir] = m.currents;
+        let [el, er] = m.encoders;
+        let fb = MotorFeedback {
+            timestamp_us: now_us,
+            left_speed: sl.to_num(),
+            right_speed: sr.to_num(),
+            left_current: il.to_num(),
+            right_current: ir.to_num(),
+            left_encoder: el,
+            right_encoder: er,
+            fault_flags: 0,
+            seq: self.seq,
+            mode: 0,
+            cmd_seq: self.cmd_seq,
+        }
+        .with_output(out);
+        encode_feedback(&fb, tx);
+    }
+
+    /// The sequence number of the last feedback frame written.
+    pub const fn feedback_seq(&self) -> u32 {
+        self.seq
+    }
+}

@@ -1,0 +1,113 @@
+//! The safety core as the board runs it: the ladder, the tick count, and the trace of what the
+//! ladder did. Both priority-2 tasks (frames and ticks) step the ladder only through
+//! [`Safety::step`], so every mode change, latch and re-arm is recorded whichever task caused it.
+
+use crate::trace::{Record, Trace};
+use statemachine::{Config, Event, FaultFlags, Ladder, Mode, Output};
+
+/// Ladder, tick count and trace.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Safety {
+    ladder: Ladder,
+    ticks: u32,
+    trace: Trace,
+}
+
+impl Safety {
+    /// Power-on state: BRAKE latched until the host arms (see [`Ladder::new`]).
+    pub const fn new(cfg: Config) -> Self {
+        Self {
+            ladder: Ladder::new(cfg),
+            ticks: 0,
+            trace: Trace::new(),
+        }
+    }
+
+    /// Feeds one event to the ladder and records what changed.
+    pub fn step(&mut self, event: Event) -> Output {
+        let before = self.ladder;
+        let out = self.ladder.step(event);
+        self.record(&before, &out);
+        out
+    }
+
+    /// One watchdog tick: counts it, then steps the ladder.
+    pub(crate) fn tick(&mut self) -> Output {
+        self.ticks = self.ticks.wrapping_add(1);
+        self.step(Event::Tick)
+    }
+
+    fn record(&mut self, before: &Ladder, out: &Output) {
+        let t = self.ticks;
+        let (c0, c1) = (before.counters(), self.ladder.counters());
+        if c1.rearms != c0.rearms {
+            self.trace.push(t, Record::Rearmed);
+        }
+        if c1.rearm_refused != c0.rearm_refused {
+            self.trace.push(t, Record::RearmRefused);
+        }
+        if out.mode != before.mode() {
+            self.trace.push(
+                t,
+                Record::Mode {
+                    from: before.mode(),
+                    to: out.mode,
+                },
+            );
+        }
+        if c1.brake_entries != c0.brake_entries {
+            let causes = out
+                .faults
+                .without(FaultFlags::BRAKE_LATCHED)
+                .without(FaultFlags::LINK_DEGRADED);
+            self.trace.push(t, Record::Latched(causes));
+        }
+    }
+
+    /// Records an ESTOP press seen by the input's own handler.
+    pub fn note(&mut self, record: Record) {
+        self.trace.push(self.ticks, record);
+    }
+
+    /// The ladder (read only: events go through [`Safety::step`]).
+    pub const fn ladder(&self) -> &Ladder {
+        &self.ladder
+    }
+
+    /// The ladder's current output.
+    pub fn output(&self) -> Output {
+        self.ladder.output()
+    }
+
+    /// The current rung.
+    pub const fn mode(&self) -> Mode {
+        self.ladder.mode()
+    }
+
+    /// Watchdog ticks since boot (wrapping).
+    pub const fn ticks(&self) -> u32 {
+        self.ticks
+    }
+
+    /// The trace.
+    pub const fn trace(&self) -> &Trace {
+        &self.trace
+    }
+
+    /// Microseconds since boot from the tick timer's counter (see [`crate::timing::micros`]).
+    pub const fn micros(
+        &self,
+        count: u32,
+        update_pending: bool,
+        counts_per_tick: u32,
+        us_per_tick: u32,
+    ) -> u32 {
+        crate::timing::micros(
+            self.ticks,
+            count,
+            update_pending,
+            counts_per_tick,
+            us_per_tick,
+        )
+    }
+}

@@ -1,0 +1,261 @@
+//! The simulated board: the board application (`mcu` crate, the same task bodies the firmware
+//! runs) at the board's rates, with simulated peripherals in place of the registers.
+//!
+//! ```text
+//!  task (rate)                body (crate mcu)           simulated peripheral
+//!  spi_dma_done  (per frame)  LinkTask::on_frame         the frame the host sent; tx buffer
+//!  estop_input   (edge)       EstopInput::edge           the ESTOP input level
+//!  watchdog_tick (1 kHz)      TickTask::run              fault lines (inactive), IWDG feed record
+//!  speed_pid     (10 kHz)     SpeedLoop::run             encoder counters of the plant (+ glitches)
+//!  current_loop  (20 kHz)     CurrentLoop::run           shunt ADC: plant current → 12-bit counts
+//! ```
+//! Within one 50 µs step the order is: SPI completion (if one happened), ESTOP edge, watchdog tick
+//! (every 20th step), speed loop (every 2nd step), current loop: the firmware's priorities, with
+//! each interrupt's trigger at the start of the step.
+
+use control::{BridgeCompare, BridgeState, Q};
+use mcu::tick::{Runs, TickInputs};
+use mcu::tuning::Tuning;
+use mcu::{Bridge, CurrentLoop, EstopInput, LinkTask, Measurements, Safety, SpeedLoop, TickTask};
+use protocol::amr::FRAME_LEN;
+use statemachine::{Output, Speed};
+
+use crate::plant::BridgeDrive;
+
+/// Counts of the board's tick timer per 1 ms tick (TIM2 at 84 MHz, prescaler 2).
+pub const TICK_COUNTS: u32 = 42_000;
+/// Simulation steps (current-loop periods) per tick.
+const STEPS_PER_TICK: u64 = 20;
+/// Level of the hardware overcurrent comparator on the break input, A.
+pub const COMPARATOR_AMPS: f64 = 15.0;
+
+/// The simulated H-bridges: what the firmware's TIM1/TIM8 registers would hold.
+#[derive(Clone, Copy, Debug)]
+pub struct SimBridge {
+    arr: u16,
+    state: BridgeState,
+    compares: [BridgeCompare; 2],
+    tripped: bool,
+}
+
+impl SimBridge {
+    fn new(arr: u16) -> Self {
+        Self {
+            arr,
+            state: BridgeState::Brake,
+            compares: [BridgeCompare::default(); 2],
+            tripped: false,
+        }
+    }
+
+    /// How the plant sees each bridge: the average duty of the compare values, or shorted.
+    pub fn drive(&self) -> [BridgeDrive; 2] {
+        let arr = f64::from(self.arr.max(1));
+        self.compares.map(|c| match self.state {
+            BridgeState::Brake => BridgeDrive::Short,
+            BridgeState::Run => BridgeDrive::Pwm((f64::from(c.a) - f64::from(c.b)) / arr),
+        })
+    }
+}
+
+impl Bridge for SimBridge {
+    fn pwm_arr(&self) -> u16 {
+        self.arr
+    }
+    fn state(&self) -> BridgeState {
+        self.state
+    }
+    fn apply(&mut self, state: BridgeState) {
+        if state != self.state {
+            self.compares = [BridgeCompare::default(); 2];
+            self.state = state;
+        }
+    }
+    fn set(&mut self, compares: [BridgeCompare; 2]) {
+        if self.state == BridgeState::Run {
+            self.compares = compares;
+        }
+    }
+    fn break_tripped(&self) -> bool {
+        self.tripped
+    }
+    fn clear_break(&mut self) {
+        self.tripped = false;
+    }
+}
+
+/// What the board did in one step that the simulator records.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct StepReport {
+    /// A watchdog tick ran in this step.
+    pub ticked: bool,
+    /// The tick refreshed the IWDG.
+    pub fed_watchdog: bool,
+}
+
+/// The board: task state as the firmware holds it, and the simulated peripherals.
+#[derive(Clone, Debug)]
+pub struct SimBoard {
+    tuning: Tuning,
+    safety: Safety,
+    link: LinkTask,
+    tick: TickTask,
+    speed: SpeedLoop,
+    current: CurrentLoop,
+    estop: EstopInput,
+    estop_level: bool,
+    meas: Measurements,
+    setpoint: Option<[Speed; 2]>,
+    refs: [control::Amps; 2],
+    runs: Runs,
+    /// Last ladder output.
+    pub out: Output,
+    /// The bridges.
+    pub bridge: SimBridge,
+    /// Steps since reset.
+    step_count: u64,
+    /// The feedback frame the SPI DMA will shift out in the next transfer.
+    pub tx_buffer: [u8; FRAME_LEN],
+    /// Encoder counter offsets injected by glitches.
+    pub glitch: [i32; 2],
+    /// Shunt currents (left, right), A, as the ADC saw them.
+    pub measured: [f64; 2],
+}
+
+impl SimBoard {
+    /// A board just out of reset (BRAKE latched, POWER_ON) with the encoder counters reading
+    /// `counts`. Zero-current offsets are calibrated as the firmware does: the mean reading
+    /// with the bridge braked, which here is the nominal bias.
+    pub fn new(tuning: Tuning, counts: [u16; 2]) -> Self {
+        let safety = Safety::new(tuning.ladder);
+        let arr = tuning.pwm_arr().unwrap_or(1);
+        let offsets = [tuning.adc_zero; 2];
+        let mut b = Self {
+            tuning,
+            out: safety.output(),
+            safety,
+            link: LinkTask::new(),
+            tick: TickTask::new(&tuning),
+            speed: SpeedLoop::new(&tuning, counts),
+            current: CurrentLoop::new(&tuning, offsets),
+            estop: EstopInput::new(),
+            estop_level: false,
+            meas: Measurements::default(),
+            setpoint: None,
+            refs: [Q::ZERO; 2],
+            runs: Runs::default(),
+            bridge: SimBridge::new(arr),
+            step_count: 0,
+            tx_buffer: [0; FRAME_LEN],
+            glitch: [0; 2],
+            measured: [0.0; 2],
+        };
+        let out = b.out;
+        b.link.feedback(&out, &b.meas, 0, &mut b.tx_buffer);
+        b
+    }
+
+    /// The tuning.
+    pub fn tuning(&self) -> &Tuning {
+        &self.tuning
+    }
+
+    /// The safety core (ladder, tick count, trace).
+    pub fn safety(&self) -> &Safety {
+        &self.safety
+    }
+
+    /// Speed estimates (left, right), rad/s.
+    pub fn speed_estimate(&self) -> [f64; 2] {
+        self.meas.speeds.map(|s| s.to_num())
+    }
+
+    /// Duty per wheel as the bridges apply it (0 when braked).
+    pub fn duty(&self) -> [f64; 2] {
+        self.bridge.drive().map(|d| match d {
+            BridgeDrive::Pwm(x) => x,
+            BridgeDrive::Short => 0.0,
+        })
+    }
+
+    /// The board's clock as the firmware reads it in this step: µs since reset, from the tick
+    /// count and the tick timer's counter. A tick due in this step has not run yet when the SPI
+    /// completion runs (it is taken first), so its update flag is pending.
+    pub fn now_us(&self) -> u32 {
+        let phase = self.step_count % STEPS_PER_TICK;
+        let count = phase as u32 * (TICK_COUNTS / STEPS_PER_TICK as u32);
+        let pending = phase == 0 && self.step_count > 0;
+        self.safety
+            .micros(count, pending, TICK_COUNTS, self.tuning.us_per_tick())
+    }
+
+    /// `spi_dma_done`: a command frame arrived. Returns whether the ladder accepted it as valid
+    /// and the time stamp the next feedback frame carries.
+    pub fn on_frame(&mut self, frame: &[u8; FRAME_LEN]) -> (bool, u32) {
+        let before = self.safety.ladder().counters().valid_frames;
+        let now = self.now_us();
+        self.out = self.link.on_frame(
+            &mut self.safety,
+            frame,
+            &self.meas,
+            now,
+            &mut self.tx_buffer,
+        );
+        (self.safety.ladder().counters().valid_frames != before, now)
+    }
+
+    /// The ESTOP input's level (pressed = true); an edge runs the input's handler.
+    pub fn set_estop(&mut self, pressed: bool) {
+        if pressed != self.estop_level {
+            self.estop_level = pressed;
+            self.estop.edge(&mut self.bridge, pressed);
+        }
+    }
+
+    /// One 50 µs step: the timer-driven tasks. `counts` are the encoder counters, `currents` the
+    /// true shunt currents, A.
+    pub fn step(&mut self, counts: [u16; 2], currents: [f64; 2]) -> StepReport {
+        let mut rep = StepReport::default();
+        // The comparator on the break input acts on the true current, without software.
+        if currents.iter().any(|i| i.abs() >= COMPARATOR_AMPS) {
+            self.bridge.tripped = true;
+            self.bridge.apply(BridgeState::Brake);
+        }
+        if self.step_count % STEPS_PER_TICK == 0 && self.step_count > 0 {
+            let inputs = TickInputs {
+                meas: self.meas.take_for_tick(),
+                driver_fault: false,
+                thermal_warning: false,
+                estop: self.estop.poll(self.estop_level),
+                runs: self.runs,
+            };
+            let o = self.tick.run(&mut self.safety, &inputs);
+            o.drive(&mut self.bridge, &self.estop);
+            self.setpoint = o.setpoint();
+            self.out = o.out;
+            rep.ticked = true;
+            rep.fed_watchdog = o.feed_watchdog;
+        }
+        if self.step_count % 2 == 0 {
+            let c = [0, 1].map(|k| counts[k].wrapping_add(self.glitch[k] as u16));
+            let s = self.speed.run(c, self.setpoint);
+            self.meas.record_speed(&s);
+            self.refs = s.refs;
+            self.runs.speed = self.runs.speed.wrapping_add(1);
+        }
+        self.measured = currents;
+        let raw = currents.map(|i| self.adc_counts(i));
+        let s = self.current.run(&mut self.bridge, raw, self.refs);
+        self.meas.record_current(&s);
+        self.runs.current = self.runs.current.wrapping_add(1);
+        self.step_count = self.step_count.wrapping_add(1);
+        rep
+    }
+
+    /// The 12-bit reading of the shunt amplifier for a current, A (saturates at the rails).
+    fn adc_counts(&self, amps: f64) -> u16 {
+        let per = self.tuning.amps_per_count.to_num::<f64>();
+        let c = f64::from(self.tuning.adc_zero) + (amps / per).round();
+        c.clamp(0.0, 4095.0) as u16
+    }
+}
