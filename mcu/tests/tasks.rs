@@ -58,6 +58,7 @@ impl Board {
                 control_mode: 1,
                 enable,
                 seq: self.seq,
+                request: 0,
             },
             &mut f,
         );
