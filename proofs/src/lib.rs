@@ -44,6 +44,8 @@ fn plausible_command(src: &mut impl Source) -> MotorCommand {
         control_mode: 1,
         enable: src.bool(),
         seq: src.u32(),
+        // Any request: the ladder never sees it (an identity request changes only the reply).
+        request: src.u32(),
     }
 }
 
