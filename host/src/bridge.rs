@@ -132,7 +132,7 @@ impl Diagnostic {
             Self::FeedbackRejected { .. } => "feedback_rejected",
             Self::Feedback { fault } => match fault {
                 FeedbackFault::SpeedImplausible => "speed_implausible",
-                FeedbackFault::NegativeCurrent => "negative_current",
+                FeedbackFault::CurrentOutOfRange => "current_out_of_range",
                 FeedbackFault::EncoderInconsistent => "encoder_inconsistent",
                 FeedbackFault::Stale => "feedback_stale",
                 FeedbackFault::NonFinite => "feedback_non_finite",

@@ -1,4 +1,24 @@
 //! Feedback validation: the host never trusts what the MCU reports (seed 000, "Jetson rule").
+//!
+//! # Motor current: signed, bounded by the sensor's full scale
+//!
+//! Seed 000 says "negative current = sensor failure". That rule was written for a unidirectional
+//! current sensor, which cannot read below zero unless it is broken. This board measures each motor
+//! with a bidirectional shunt amplifier and the firmware reports the current **signed**: negative
+//! means reverse torque (driving backwards) or regenerative braking, both normal. Kept as written,
+//! the seed's rule would flag a sensor fault whenever a wheel drives backwards or the robot brakes.
+//!
+//! What still cannot come from a working sensor chain is a reading beyond the sensor's measurable
+//! range: the ADC saturates at full scale, so a larger magnitude means a broken conversion (offset,
+//! scale, wiring) or a corrupted value. The rule is therefore `|current| > current_full_scale` ⇒
+//! [`FeedbackFault::CurrentOutOfRange`], with the full scale from the board:
+//!
+//! ```text
+//!  5 mΩ shunt × gain 20 = 0.1 V/A;  3.3 V / 4096 counts = 0.806 mV/count  →  8.06 mA per count
+//!  mid-scale reference (bidirectional): ±2048 counts × 8.06 mA = ±16.5 A
+//! ```
+//! A real overcurrent is the MCU's to act on (it braked already); a sensor that reads a constant
+//! in-range value is caught by the encoder/speed checks, not here.
 
 /// Why a feedback frame (or its absence) was judged wrong. Codes are fixed and never reused.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize)]
@@ -6,8 +26,10 @@
 pub enum FeedbackFault {
     /// A wheel speed above 2 × the maximum: the encoder or its decoding is broken.
     SpeedImplausible = 1,
-    /// A current below zero (beyond noise): the shunt or its amplifier failed.
-    NegativeCurrent = 2,
+    /// A motor current whose magnitude exceeds the sensor's full scale: the shunt, its amplifier or
+    /// the conversion failed. Negative currents are normal (reverse torque, regenerative braking);
+    /// this replaces the seed's "negative current" rule, see the module documentation.
+    CurrentOutOfRange = 2,
     /// Encoder counts moved against the sign of the reported speed, or far from it.
     EncoderInconsistent = 3,
     /// No new feedback (MCU timestamp not advancing) for longer than the stale limit: MCU frozen.
@@ -31,13 +53,18 @@ pub struct FeedbackSample {
     pub faults: u16,
 }
 
+/// The board's current sensor full scale, A: ±2048 counts of a 3.3 V 12-bit ADC around mid-scale,
+/// 8.06 mA per count (5 mΩ shunt × gain 20 = 0.1 V/A).
+pub const BOARD_CURRENT_FULL_SCALE_A: f64 = 16.5;
+
 /// Thresholds for [`FeedbackMonitor`].
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct FeedbackLimits {
     /// Largest wheel speed, rad/s; twice this is implausible.
     pub max_wheel_speed: f64,
-    /// Currents below −this are a sensor failure, A (allows ADC noise around zero).
-    pub negative_current_tolerance: f64,
+    /// The current sensor's measurable full scale, A: a reported motor current whose magnitude
+    /// exceeds it is a sensor failure. Currents of either sign within it are normal.
+    pub current_full_scale: f64,
     /// Encoder counts per wheel radian.
     pub counts_per_rad: f64,
     /// Speeds below this are not checked against the encoder direction, rad/s.
@@ -51,10 +78,11 @@ pub struct FeedbackLimits {
 }
 
 impl FeedbackLimits {
-    /// 20 rad/s MCU limit, 0.2 A noise, 4096 counts per wheel revolution, 5 ms stale limit.
+    /// 20 rad/s MCU limit, ±16.5 A current full scale ([`BOARD_CURRENT_FULL_SCALE_A`]), 4096 counts
+    /// per wheel revolution, 5 ms stale limit.
     pub const DEFAULT: Self = Self {
         max_wheel_speed: 20.0,
-        negative_current_tolerance: 0.2,
+        current_full_scale: BOARD_CURRENT_FULL_SCALE_A,
         counts_per_rad: 4096.0 / core::f64::consts::TAU,
         direction_min_speed: 0.5,
         count_tolerance: 0.5,
@@ -128,8 +156,8 @@ impl FeedbackMonitor {
             }
         }
         for &i in &s.current {
-            if f64::from(i) < -l.negative_current_tolerance {
-                self.note(&mut out, FeedbackFault::NegativeCurrent);
+            if f64::from(i).abs() > l.current_full_scale {
+                self.note(&mut out, FeedbackFault::CurrentOutOfRange);
             }
         }
         match self.last {
@@ -235,11 +263,11 @@ mod tests {
         assert!(m
             .check(1000, &sample(1, 41.0, 20))
             .contains(&FeedbackFault::SpeedImplausible));
-        let mut neg = sample(2, 10.0, 27);
-        neg.current[1] = -0.5;
+        let mut over = sample(2, 10.0, 27);
+        over.current[1] = 17.0;
         assert!(m
-            .check(2000, &neg)
-            .contains(&FeedbackFault::NegativeCurrent));
+            .check(2000, &over)
+            .contains(&FeedbackFault::CurrentOutOfRange));
         // Forward speed but counts going backwards by 50.
         assert!(m
             .check(3000, &sample(3, 10.0, -23))
@@ -247,6 +275,41 @@ mod tests {
         let mut nan = sample(4, 10.0, -17);
         nan.speed[0] = f32::NAN;
         assert!(m.check(4000, &nan).contains(&FeedbackFault::NonFinite));
+    }
+
+    #[test]
+    fn board_full_scale_is_2048_counts_of_8_06_ma() {
+        let amps_per_count: f64 = (3.3 / 4096.0) / (0.005 * 20.0);
+        assert!((amps_per_count - 0.00806).abs() < 1e-5);
+        assert!((2048.0 * amps_per_count - BOARD_CURRENT_FULL_SCALE_A).abs() < 1e-9);
+    }
+
+    /// Signed currents: reverse and regenerative currents within the full scale are normal; beyond
+    /// it, in either direction, the sensor has failed.
+    #[test]
+    fn current_is_checked_by_magnitude_against_the_full_scale() {
+        let verdict = |current: [f32; 2]| {
+            let mut m = FeedbackMonitor::new(FeedbackLimits::DEFAULT);
+            let mut s = sample(0, 0.0, 0);
+            s.current = current;
+            m.check(0, &s).contains(&FeedbackFault::CurrentOutOfRange)
+        };
+        // Driving backwards (−10 A) and regenerative braking (−0.5 A) are accepted.
+        assert!(!verdict([-10.0, -10.0]));
+        assert!(!verdict([-0.5, 3.0]));
+        // Exactly at full scale (a saturated reading) is still a reading.
+        assert!(!verdict([16.5, -16.5]));
+        // Beyond full scale, either sign, either wheel: flagged.
+        assert!(verdict([17.0, 0.0]));
+        assert!(verdict([0.0, -17.0]));
+        // The limit is configurable.
+        let mut m = FeedbackMonitor::new(FeedbackLimits {
+            current_full_scale: 5.0,
+            ..FeedbackLimits::DEFAULT
+        });
+        let mut s = sample(0, 0.0, 0);
+        s.current = [-6.0, 0.0];
+        assert_eq!(m.check(0, &s), vec![FeedbackFault::CurrentOutOfRange]);
     }
 
     #[test]
