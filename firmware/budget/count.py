@@ -17,9 +17,9 @@ SAMPLES = int(os.environ.get("BUDGET_SAMPLES", "5"))
 
 # name, symbol, kind: "fn" returns to its caller; "isr" returns from the exception.
 UNITS = [
-    ("frame: on_frame (CRC + decode + validate + ladder step)", "firmware::glue::on_frame", "fn"),
-    ("frame: feedback (encode feedback frame)", "firmware::glue::feedback", "fn"),
-    ("tick: on_tick (conditions + ladder step)", "firmware::glue::on_tick", "fn"),
+    ("frame: receive (CRC + decode + validate + ladder step)", "mcu::link::LinkTask::receive", "fn"),
+    ("frame: feedback (encode feedback frame)", "mcu::link::LinkTask::feedback", "fn"),
+    ("tick: run (conditions + ladder step)", "mcu::tick::TickTask::run", "fn"),
     ("current_loop handler (ADC)", "ADC", "isr"),
     ("speed_pid handler (TIM5)", "TIM5", "isr"),
 ]
