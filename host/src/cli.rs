@@ -16,6 +16,9 @@ pub enum FrameKind {
     AmrCommand,
     /// Seed 000 SPI feedback frame (MCU → Jetson), 64 bytes.
     AmrFeedback,
+    /// Seed 000 SPI identity frame `McuInfo` (MCU → Jetson, in the feedback slot after a command
+    /// with request 1), 64 bytes.
+    AmrInfo,
     /// Seed 001 USB CDC / UART frame `AA 55 | id | len | payload | crc` (decode also takes a capture).
     Cdc,
     /// Seed 004 Pi → STM32 `RxBuffer`, 179 bytes.
@@ -37,6 +40,7 @@ the first enum value, an unknown field or a wrong type is an error naming the fi
 
 amr-command   {"timestamp_us":1000,"left_speed_cmd":1.5,"right_speed_cmd":-1.5,"control_mode":1,"enable":true,"seq":1,"request":0}
 amr-feedback  {"timestamp_us":5,"left_speed":0.5,"right_speed":-0.5,"left_current":1.25,"right_current":0.75,"left_encoder":-3,"right_encoder":7,"fault_flags":2,"seq":9,"mode":1,"cmd_seq":8}
+amr-info      {"fw_version":66051,"git_hash":439041101,"board":"amr_spi","build_date":20261130,"reset_cause":"independent_watchdog","reset_count":2,"panic_line":0,"seq":1234,"dirty":false}
 cdc           {"type":"set_motor_pwm","pwm":[-1000,1000,0,1],"timeout_ms":200}
               {"type":"motor_enable","enable":true}        (required field)
               {"type":"estop","action":"engage"}           (required field; "engage" | "release")
@@ -50,6 +54,13 @@ teensy-legacy {"cmd_type":"mtrs","is_relative":1,"mtr_angles":[90,-90,2570,21474
 teensy-robust (the same shape as teensy-legacy)
 
 Fields:
+  amr-command request: 0 none, 1 identity (the MCU answers with an amr-info frame in the next
+    feedback slot; `motorlink info` does this for you).
+  amr-info fw_version: major << 16 | minor << 8 | patch (66051 = 1.2.3); git_hash: the first 8 hex
+    digits of the commit as a number (439041101 = 1a2b3c4d, 0 unknown); build_date: YYYYMMDD;
+    board: "amr_spi" | "cdc" | "teensy" | "pi_spi";
+    reset_cause: "unknown" | "power_on" | "pin" | "independent_watchdog" | "panic" | "software" |
+    "brownout" | "window_watchdog" | "low_power"; panic_line: 0 if none.
   pi-rx updates: flags bits 0-5 (the parity bit 7 is added by encode, checked by decode);
     motor_control_mode: "off" | "passive_brake" | "pwm" | "mav" | "mtp";
     servo_mode: "fully_disabled" | "disabled" | "enabled"; transferVersion (15) is implicit.
@@ -379,7 +390,9 @@ fn exact<const L: usize>(bytes: &[u8], what: &str, hint: &str) -> Result<[u8; L]
 pub fn decode(kind: FrameKind, hex: &str, motors: usize) -> Result<String, String> {
     let bytes = parse_hex(hex)?;
     match kind {
-        FrameKind::AmrCommand | FrameKind::AmrFeedback => decode_amr(kind, &bytes),
+        FrameKind::AmrCommand | FrameKind::AmrFeedback | FrameKind::AmrInfo => {
+            decode_amr(kind, &bytes)
+        }
         FrameKind::Cdc => decode_cdc(&bytes),
         FrameKind::PiRx => decode_pi_rx(&bytes),
         FrameKind::PiTx => decode_pi_tx(&bytes),
@@ -401,6 +414,12 @@ pub fn encode(kind: FrameKind, json: &str, motors: usize) -> Result<String, Stri
             let f: amr::MotorFeedback = from_json(json)?;
             let mut out = [0u8; amr::FRAME_LEN];
             amr::encode_feedback(&f, &mut out);
+            Ok(to_hex(&out))
+        }
+        FrameKind::AmrInfo => {
+            let i: amr::McuInfo = from_json(json)?;
+            let mut out = [0u8; amr::FRAME_LEN];
+            amr::encode_info(&i, &mut out);
             Ok(to_hex(&out))
         }
         FrameKind::Cdc => {
@@ -432,10 +451,10 @@ pub fn encode(kind: FrameKind, json: &str, motors: usize) -> Result<String, Stri
 fn decode_amr(kind: FrameKind, bytes: &[u8]) -> Result<String, String> {
     let frame: [u8; amr::FRAME_LEN] =
         exact(bytes, "an AMR SPI frame", "capture one whole CS-low period")?;
-    let r = if kind == FrameKind::AmrCommand {
-        amr::decode_command(&frame).map(|c| pretty(&c))
-    } else {
-        amr::decode_feedback(&frame).map(|f| pretty(&f))
+    let r = match kind {
+        FrameKind::AmrCommand => amr::decode_command(&frame).map(|c| pretty(&c)),
+        FrameKind::AmrInfo => amr::decode_info(&frame).map(|i| pretty(&i)),
+        _ => amr::decode_feedback(&frame).map(|f| pretty(&f)),
     };
     r.map_err(|reason| {
         let detail = match reason {
@@ -451,10 +470,23 @@ fn decode_amr(kind: FrameKind, bytes: &[u8]) -> Result<String, String> {
                 frame.first().copied().unwrap_or(0),
                 amr::MAX_PAYLOAD
             ),
+            RejectReason::Version if kind == FrameKind::AmrInfo => format!(
+                "info_version in the payload is not {}{}",
+                amr::INFO_VERSION,
+                if amr::decode_feedback(&frame).is_ok() {
+                    "; this is a MotorFeedback frame: decode it with --frame amr-feedback"
+                } else {
+                    " (missing: not an McuInfo frame); update the other side"
+                }
+            ),
+            RejectReason::Version if kind == FrameKind::AmrFeedback && amr::decode_info(&frame).is_ok() => {
+                "this is an McuInfo frame (the MCU's answer to an identity request, sent in the feedback slot): decode it with --frame amr-info".into()
+            }
             RejectReason::Version => format!(
                 "protocol_version in the payload is not {}; update the other side",
                 amr::PROTOCOL_VERSION
             ),
+            _ if kind == FrameKind::AmrInfo => "the protobuf payload does not decode as McuInfo: a board above 3 or a reset_cause above 8 (not defined by this version), dirty not 0/1, a field of the wrong wire type, or truncated".into(),
             _ => "the protobuf payload does not decode (truncated, a field of the wrong wire type, or a value out of range); is this the other direction's frame?".into(),
         };
         refused(reason, &detail)

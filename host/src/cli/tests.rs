@@ -25,6 +25,10 @@ fn examples() -> Vec<(FrameKind, &'static str)> {
             r#"{"timestamp_us":5,"left_speed":0.5,"right_speed":-0.5,"left_current":1.25,"right_current":0.75,"left_encoder":-3,"right_encoder":7,"fault_flags":2,"seq":9,"mode":1,"cmd_seq":8}"#,
         ),
         (
+            FrameKind::AmrInfo,
+            r#"{"fw_version":66051,"git_hash":439041101,"board":"amr_spi","build_date":20261130,"reset_cause":"independent_watchdog","reset_count":2,"panic_line":0,"seq":1234,"dirty":false}"#,
+        ),
+        (
             FrameKind::Cdc,
             r#"{"type":"set_motor_pwm","pwm":[-1000,1000,0,1],"timeout_ms":200}"#,
         ),
@@ -338,26 +342,41 @@ fn golden_amr_frames_decode_to_the_python_values() {
         "left_current",
         "right_current",
     ];
+    // The wire values of McuInfo's enumerations, as the .proto comments list them.
+    let boards = ["amr_spi", "cdc", "teensy", "pi_spi"];
+    let causes = [
+        "unknown",
+        "power_on",
+        "pin",
+        "independent_watchdog",
+        "panic",
+        "software",
+        "brownout",
+        "window_watchdog",
+        "low_power",
+    ];
     let mut n = 0;
     for (case, frame) in cases.lines().zip(frames.lines()) {
-        if case.starts_with("info ") {
-            continue; // McuInfo frames: no frame kind for them here yet
-        }
         let c: Vec<&str> = case.split_whitespace().collect();
         let f: Vec<&str> = frame.split_whitespace().collect();
         assert_eq!(c[0], f[0]);
-        let kind = if c[0] == "command" {
-            FrameKind::AmrCommand
-        } else {
-            FrameKind::AmrFeedback
+        let kind = match c[0] {
+            "command" => FrameKind::AmrCommand,
+            "feedback" => FrameKind::AmrFeedback,
+            "info" => FrameKind::AmrInfo,
+            other => panic!("unknown kind {other}"),
         };
         let mut want = serde_json::Map::new();
         for (k, v) in kv(&c[1..]) {
             let v: i64 = v.parse().unwrap();
             let val = if float_fields.contains(&k.as_str()) {
                 fbits(v)
-            } else if k == "enable" {
+            } else if k == "enable" || k == "dirty" {
                 json!(v == 1)
+            } else if k == "board" {
+                json!(boards[v as usize])
+            } else if k == "reset_cause" {
+                json!(causes[v as usize])
             } else {
                 json!(v)
             };
@@ -371,7 +390,7 @@ fn golden_amr_frames_decode_to_the_python_values() {
         }
         n += 1;
     }
-    assert_eq!(n, 12);
+    assert_eq!(n, 17);
 }
 
 // ---- errors: each names the problem ----
@@ -454,6 +473,35 @@ fn crc_errors_report_reason_code_and_both_crcs() {
         e.contains("Crc") && e.contains("computed 0x650d") && e.contains("carries 0x660d"),
         "{e}"
     );
+}
+
+#[test]
+fn info_and_feedback_frames_point_to_each_other() {
+    let info = example(FrameKind::AmrInfo);
+    let e = err(FrameKind::AmrFeedback, &info);
+    assert!(
+        e.contains("Version") && e.contains("McuInfo") && e.contains("--frame amr-info"),
+        "{e}"
+    );
+    let fb = example(FrameKind::AmrFeedback);
+    let e = err(FrameKind::AmrInfo, &fb);
+    assert!(
+        e.contains("info_version") && e.contains("--frame amr-feedback"),
+        "{e}"
+    );
+    let e = err(FrameKind::AmrInfo, &example(FrameKind::AmrCommand));
+    assert!(e.contains("info_version") && e.contains("missing"), "{e}");
+    // An undefined reset cause (9) in an otherwise valid frame.
+    let mut f = [0u8; 64];
+    let payload = [0x80, 0x01, 0x01, 0xA8, 0x01, 0x09];
+    f[0] = payload.len() as u8;
+    f[1..1 + payload.len()].copy_from_slice(&payload);
+    let crc = protocol::crc16::checksum(&f[..62]);
+    f[62..].copy_from_slice(&crc.to_be_bytes());
+    let e = err(FrameKind::AmrInfo, &to_hex(&f));
+    assert!(e.contains("Decode") && e.contains("reset_cause"), "{e}");
+    let e = encode(FrameKind::AmrInfo, r#"{"board":"vax"}"#, 4).unwrap_err();
+    assert!(e.contains("board") && e.contains("pi_spi"), "{e}");
 }
 
 #[test]
@@ -712,6 +760,7 @@ fn no_input_makes_any_decoder_panic() {
     let kinds = [
         FrameKind::AmrCommand,
         FrameKind::AmrFeedback,
+        FrameKind::AmrInfo,
         FrameKind::Cdc,
         FrameKind::PiRx,
         FrameKind::PiTx,
