@@ -13,7 +13,8 @@
 //! (every 20th step), speed loop (every 2nd step), current loop: the firmware's priorities, with
 //! each interrupt's trigger at the start of the step.
 
-use control::{BridgeCompare, BridgeState, Q};
+use control::{BridgeState, Q};
+use mcu::hw::RecordingBridge;
 use mcu::tick::{Runs, TickInputs};
 use mcu::tuning::Tuning;
 use mcu::{Bridge, CurrentLoop, EstopInput, LinkTask, Measurements, Safety, SpeedLoop, TickTask};
@@ -30,58 +31,15 @@ const STEPS_PER_TICK: u64 = 20;
 pub const COMPARATOR_AMPS: f64 = 15.0;
 
 /// The simulated H-bridges: what the firmware's TIM1/TIM8 registers would hold.
-#[derive(Clone, Copy, Debug)]
-pub struct SimBridge {
-    arr: u16,
-    state: BridgeState,
-    compares: [BridgeCompare; 2],
-    tripped: bool,
-}
+pub type SimBridge = RecordingBridge;
 
-impl SimBridge {
-    fn new(arr: u16) -> Self {
-        Self {
-            arr,
-            state: BridgeState::Brake,
-            compares: [BridgeCompare::default(); 2],
-            tripped: false,
-        }
-    }
-
-    /// How the plant sees each bridge: the average duty of the compare values, or shorted.
-    pub fn drive(&self) -> [BridgeDrive; 2] {
-        let arr = f64::from(self.arr.max(1));
-        self.compares.map(|c| match self.state {
-            BridgeState::Brake => BridgeDrive::Short,
-            BridgeState::Run => BridgeDrive::Pwm((f64::from(c.a) - f64::from(c.b)) / arr),
-        })
-    }
-}
-
-impl Bridge for SimBridge {
-    fn pwm_arr(&self) -> u16 {
-        self.arr
-    }
-    fn state(&self) -> BridgeState {
-        self.state
-    }
-    fn apply(&mut self, state: BridgeState) {
-        if state != self.state {
-            self.compares = [BridgeCompare::default(); 2];
-            self.state = state;
-        }
-    }
-    fn set(&mut self, compares: [BridgeCompare; 2]) {
-        if self.state == BridgeState::Run {
-            self.compares = compares;
-        }
-    }
-    fn break_tripped(&self) -> bool {
-        self.tripped
-    }
-    fn clear_break(&mut self) {
-        self.tripped = false;
-    }
+/// How the plant sees each bridge: the average duty of the compare values, or shorted.
+pub fn bridge_drive(b: &SimBridge) -> [BridgeDrive; 2] {
+    let arr = f64::from(b.arr.max(1));
+    b.compares.map(|c| match b.state {
+        BridgeState::Brake => BridgeDrive::Short,
+        BridgeState::Run => BridgeDrive::Pwm((f64::from(c.a) - f64::from(c.b)) / arr),
+    })
 }
 
 /// What the board did in one step that the simulator records.
@@ -172,7 +130,7 @@ impl SimBoard {
 
     /// Duty per wheel as the bridges apply it (0 when braked).
     pub fn duty(&self) -> [f64; 2] {
-        self.bridge.drive().map(|d| match d {
+        bridge_drive(&self.bridge).map(|d| match d {
             BridgeDrive::Pwm(x) => x,
             BridgeDrive::Short => 0.0,
         })

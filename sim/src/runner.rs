@@ -507,7 +507,7 @@ pub fn run<H: HostModel>(
                 last_feed = t;
             }
         }
-        plant.step(dt, mcu.bridge.drive(), [0.0; 2]);
+        plant.step(dt, crate::board::bridge_drive(&mcu.bridge), [0.0; 2]);
 
         // Measurements.
         let out = mcu.out;
@@ -533,9 +533,7 @@ pub fn run<H: HostModel>(
             prev_mode = out.mode;
         }
         if let Some(o) = onset {
-            let braked = mcu
-                .bridge
-                .drive()
+            let braked = crate::board::bridge_drive(&mcu.bridge)
                 .iter()
                 .all(|d| matches!(d, BridgeDrive::Short));
             if t >= o && braked && s.bridge_brake_ms.is_none() {
@@ -579,7 +577,10 @@ pub fn run<H: HostModel>(
             if let Some(w) = trace.as_deref_mut() {
                 if tick_index % u64::from(sc.trace_every_ms) == 0 {
                     let est = mcu.speed_estimate();
-                    let brake = matches!(mcu.bridge.drive()[0], BridgeDrive::Short);
+                    let brake = matches!(
+                        crate::board::bridge_drive(&mcu.bridge)[0],
+                        BridgeDrive::Short
+                    );
                     let duty = mcu.duty();
                     writeln!(
                         w,

@@ -23,8 +23,7 @@ pub struct SpiLink {
     tx: *mut [[u8; FRAME_LEN]; 2],
 }
 
-
-// SAFETY: `Link` is moved once, from `init` into the one task that owns it; the raw pointers
+// SAFETY: `SpiLink` is moved once, from `init` into the one task that owns it; the raw pointers
 // address 'static buffers that only that task and the DMA engine touch.
 unsafe impl Send for SpiLink {}
 
