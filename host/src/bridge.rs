@@ -6,12 +6,14 @@
 //!        older than 200 ms ⇒ target 0                  enable = 0 unless Armed
 //!  feedback ──► checks (speed, current, encoder, staleness) ──► diagnostics; clock sync
 //!        MCU in BRAKE, or feedback stale ⇒ Latched: enable = 0, zero, wait for an explicit re-arm
+//!  McuInfo (in the feedback slot after request_identity) ──► mcu_info(); a reset since the last
+//!        one seen (count or cause changed, or a first one not from power-on) ⇒ McuReset
 //! ```
 //!
 //! Arming follows the ladder's rule: a valid frame with enable = 0, then enable = 1 (the rising
 //! edge is the re-arm request), then fresh frames. The host never re-arms by itself.
 
-use protocol::amr::{MotorCommand, MotorFeedback};
+use protocol::amr::{McuFrame, McuInfo, MotorCommand, MotorFeedback, ResetCause, REQUEST_IDENTITY};
 use statemachine::{ControlMode, FaultFlags, Mode, RejectReason};
 
 use crate::clocksync::{ClockSync, ClockSyncConfig, SeedClockSync};
@@ -121,6 +123,16 @@ pub enum Diagnostic {
         /// Time since the previous cycle, µs.
         gap_us: u64,
     },
+    /// The MCU reset (its `McuInfo` shows a reset count or cause other than the last one seen, or,
+    /// in the first one seen, a reset that was not a power-on): whatever it was doing was lost.
+    McuReset {
+        /// Why it last started.
+        cause: ResetCause,
+        /// Resets since power-on.
+        reset_count: u32,
+        /// Source line of the last panic, 0 if none.
+        panic_line: u32,
+    },
 }
 
 impl Diagnostic {
@@ -145,6 +157,7 @@ impl Diagnostic {
             Self::ClockSynced => "clock_synced",
             Self::CommandNotAccepted => "command_not_accepted",
             Self::HostLate { .. } => "host_late",
+            Self::McuReset { .. } => "mcu_reset",
         }
     }
 }
@@ -160,6 +173,8 @@ pub struct BridgeStats {
     pub feedback_rejected: u64,
     /// Exchanges where the MCU had not accepted the previous command.
     pub not_accepted: u64,
+    /// `McuInfo` frames received in the feedback slot (neither feedback nor refused).
+    pub info_frames: u64,
 }
 
 /// The bridge state.
@@ -187,6 +202,10 @@ pub struct Bridge {
     failed_in_row: u32,
     last_command_us: Option<u64>,
     diags: Vec<(u64, Diagnostic)>,
+    /// The next command asks for an `McuInfo`.
+    identity_requested: bool,
+    /// Last `McuInfo` received.
+    info: Option<McuInfo>,
     /// Last feedback decoded.
     pub last_feedback: Option<MotorFeedback>,
     /// Counters.
@@ -226,6 +245,8 @@ impl Bridge {
             failed_in_row: 0,
             last_command_us: None,
             diags: Vec::new(),
+            identity_requested: false,
+            info: None,
             last_feedback: None,
             stats: BridgeStats::default(),
         }
@@ -271,6 +292,18 @@ impl Bridge {
     /// Explicit re-arm after BRAKE (operator action); the same sequence as [`Bridge::arm`].
     pub fn rearm(&mut self, now: u64) {
         self.arm(now);
+    }
+
+    /// Asks the MCU who it is: the next command carries `request` = [`REQUEST_IDENTITY`], and the
+    /// MCU answers with an `McuInfo` in the feedback slot after it (read it with
+    /// [`Bridge::mcu_info`]). One command carries the request; if that frame is lost, ask again.
+    pub fn request_identity(&mut self) {
+        self.identity_requested = true;
+    }
+
+    /// The last `McuInfo` the MCU sent (firmware version, board, reset cause), if any.
+    pub fn mcu_info(&self) -> Option<McuInfo> {
+        self.info
     }
 
     /// Disables the drive.
@@ -329,6 +362,11 @@ impl Bridge {
             self.out = [0.0; 2];
         }
         self.seq = self.seq.wrapping_add(1);
+        let request = if core::mem::take(&mut self.identity_requested) {
+            REQUEST_IDENTITY
+        } else {
+            0
+        };
         MotorCommand {
             timestamp_us: now as u32,
             left_speed_cmd: self.out[0] as f32,
@@ -336,7 +374,66 @@ impl Bridge {
             control_mode: ControlMode::Speed as u32,
             enable,
             seq: self.seq,
-            request: 0,
+            request,
+        }
+    }
+
+    /// The exchange that sent command `seq` at `t_send` completed at `t_recv` with whatever the
+    /// MCU sent in the feedback slot (`protocol::amr::decode_mcu_frame`): a feedback goes to
+    /// [`Bridge::on_feedback`]; an `McuInfo` is neither a feedback nor a refused frame.
+    pub fn on_frame(
+        &mut self,
+        t_send: u64,
+        t_recv: u64,
+        seq: u32,
+        frame: Result<McuFrame, RejectReason>,
+    ) {
+        match frame {
+            Ok(McuFrame::Info(info)) => self.on_info(t_send, t_recv, seq, info),
+            Ok(McuFrame::Feedback(fb)) => self.on_feedback(t_send, t_recv, seq, Ok(fb)),
+            Err(reason) => self.on_feedback(t_send, t_recv, seq, Err(reason)),
+        }
+    }
+
+    /// An `McuInfo` in the feedback slot: kept for [`Bridge::mcu_info`], checked for a reset.
+    ///
+    /// It carries no measurements, so the feedback checks and the clock do not see it; but it
+    /// does not advance the MCU's timestamp either, so an MCU stuck sending the same info frame
+    /// goes stale and is reported frozen like one stuck sending the same feedback.
+    fn on_info(&mut self, t_send: u64, t_recv: u64, seq: u32, info: McuInfo) {
+        // The next feedback answers this exchange's command: pair the clock with it.
+        self.prev_exchange = Some((t_send, t_recv, seq));
+        self.stats.info_frames = self.stats.info_frames.saturating_add(1);
+        self.failed_in_row = 0;
+        // What the MCU reported before, or what a fresh power-on would report.
+        let (count, cause) = self
+            .info
+            .map_or((0, ResetCause::PowerOn), |i| (i.reset_count, i.reset_cause));
+        if (info.reset_count, info.reset_cause) != (count, cause) {
+            self.report(
+                t_recv,
+                Diagnostic::McuReset {
+                    cause: info.reset_cause,
+                    reset_count: info.reset_count,
+                    panic_line: info.panic_line,
+                },
+            );
+        }
+        self.info = Some(info);
+        if self.monitor.is_stale(t_recv) {
+            self.mcu_frozen(t_recv);
+        }
+    }
+
+    /// No new feedback for longer than the stale limit: report it once and latch (stop, and wait
+    /// for an explicit re-arm).
+    fn mcu_frozen(&mut self, t_recv: u64) {
+        if !self.frozen {
+            self.frozen = true;
+            self.report(t_recv, Diagnostic::McuFrozen);
+            if self.state != ArmState::Disarmed {
+                self.state = ArmState::Latched;
+            }
         }
     }
 
@@ -360,12 +457,8 @@ impl Bridge {
                     },
                 );
                 self.failed_in_row = self.failed_in_row.saturating_add(1);
-                if self.failed_in_row >= 5 && self.monitor.is_stale(t_recv) && !self.frozen {
-                    self.frozen = true;
-                    self.report(t_recv, Diagnostic::McuFrozen);
-                    if self.state != ArmState::Disarmed {
-                        self.state = ArmState::Latched;
-                    }
+                if self.failed_in_row >= 5 && self.monitor.is_stale(t_recv) {
+                    self.mcu_frozen(t_recv);
                 }
                 return;
             }
@@ -406,13 +499,7 @@ impl Bridge {
         }
         for f in self.monitor.check(t_recv, &sample) {
             if f == FeedbackFault::Stale {
-                if !self.frozen {
-                    self.frozen = true;
-                    self.report(t_recv, Diagnostic::McuFrozen);
-                    if self.state != ArmState::Disarmed {
-                        self.state = ArmState::Latched;
-                    }
-                }
+                self.mcu_frozen(t_recv);
             } else {
                 self.report(t_recv, Diagnostic::Feedback { fault: f });
             }
@@ -559,6 +646,141 @@ mod tests {
         }
         assert_ne!(l.mode(), Mode::Brake);
         assert!(b.drain().iter().any(|(_, d)| *d == Diagnostic::Rearmed));
+    }
+
+    /// The exchange after one that carried an identity request, as the MCU answers it: an
+    /// `McuInfo` in the feedback slot, with the feedback sequence number it takes.
+    fn exchange_info(b: &mut Bridge, l: &mut Ladder, now: u64, info: McuInfo) -> MotorCommand {
+        let c = b.next_command(now);
+        l.step(Event::Frame(c.to_command()));
+        l.step(Event::Tick);
+        b.on_frame(now, now + 300, c.seq, Ok(McuFrame::Info(info)));
+        c
+    }
+
+    #[test]
+    fn an_identity_request_rides_on_one_command() {
+        let mut b = Bridge::new(BridgeConfig::DEFAULT);
+        assert_eq!(b.next_command(0).request, 0);
+        b.request_identity();
+        let c = b.next_command(1000);
+        assert_eq!(c.request, REQUEST_IDENTITY);
+        assert!(!c.enable);
+        assert_eq!(b.next_command(2000).request, 0);
+    }
+
+    #[test]
+    fn an_info_frame_is_kept_and_is_not_a_bad_feedback_frame() {
+        let mut b = Bridge::new(BridgeConfig::DEFAULT);
+        let mut l = Ladder::new(Config::DEFAULT);
+        b.arm(0);
+        for k in 0..50u64 {
+            b.cmd_vel(k * 1000, 0.5, 0.0);
+            exchange(&mut b, &mut l, k * 1000);
+        }
+        b.drain();
+        let info = McuInfo {
+            fw_version: protocol::amr::pack_fw_version(1, 2, 3),
+            reset_cause: ResetCause::PowerOn,
+            seq: 50,
+            ..McuInfo::default()
+        };
+        b.cmd_vel(50_000, 0.5, 0.0);
+        exchange_info(&mut b, &mut l, 50_000, info);
+        for k in 51..60u64 {
+            b.cmd_vel(k * 1000, 0.5, 0.0);
+            exchange(&mut b, &mut l, k * 1000);
+        }
+        assert_eq!(b.mcu_info(), Some(info));
+        assert_eq!(b.stats.info_frames, 1);
+        assert_eq!(b.stats.feedback_rejected, 0);
+        assert_eq!(b.stats.feedback_ok, 59);
+        assert_eq!(b.state(), ArmState::Armed);
+        // A power-on reset with no reset since is no news.
+        let d = b.drain();
+        assert!(d.is_empty(), "{d:?}");
+    }
+
+    #[test]
+    fn a_reset_seen_in_the_info_is_reported_once() {
+        let mut b = Bridge::new(BridgeConfig::DEFAULT);
+        let mut l = Ladder::new(Config::DEFAULT);
+        let at_power_on = McuInfo {
+            reset_cause: ResetCause::PowerOn,
+            ..McuInfo::default()
+        };
+        exchange_info(&mut b, &mut l, 0, at_power_on);
+        assert!(b.drain().is_empty());
+        // The watchdog bit: reset count up, cause not power-on.
+        let watchdog = McuInfo {
+            reset_cause: ResetCause::IndependentWatchdog,
+            reset_count: 1,
+            ..at_power_on
+        };
+        exchange(&mut b, &mut l, 1000);
+        exchange_info(&mut b, &mut l, 2000, watchdog);
+        let want = Diagnostic::McuReset {
+            cause: ResetCause::IndependentWatchdog,
+            reset_count: 1,
+            panic_line: 0,
+        };
+        assert_eq!(
+            b.drain().iter().filter(|(_, d)| *d == want).count(),
+            1,
+            "reported"
+        );
+        assert_eq!(want.name(), "mcu_reset");
+        // Asked again, the same answer: nothing new.
+        exchange_info(&mut b, &mut l, 3000, watchdog);
+        assert!(!b
+            .drain()
+            .iter()
+            .any(|(_, d)| matches!(d, Diagnostic::McuReset { .. })));
+        // A panic next: the count goes up again.
+        let panic = McuInfo {
+            reset_cause: ResetCause::Panic,
+            reset_count: 2,
+            panic_line: 417,
+            ..at_power_on
+        };
+        exchange_info(&mut b, &mut l, 4000, panic);
+        assert!(b.drain().iter().any(|(_, d)| *d
+            == Diagnostic::McuReset {
+                cause: ResetCause::Panic,
+                reset_count: 2,
+                panic_line: 417
+            }));
+        // The first info a bridge ever sees already shows a reset: reported too.
+        let mut fresh = Bridge::new(BridgeConfig::DEFAULT);
+        exchange_info(&mut fresh, &mut l, 5000, watchdog);
+        assert!(fresh
+            .drain()
+            .iter()
+            .any(|(_, d)| matches!(d, Diagnostic::McuReset { .. })));
+        // A power cycle after a reset (count back to 0): the MCU restarted.
+        exchange_info(&mut b, &mut l, 6000, at_power_on);
+        assert!(b.drain().iter().any(|(_, d)| *d
+            == Diagnostic::McuReset {
+                cause: ResetCause::PowerOn,
+                reset_count: 0,
+                panic_line: 0
+            }));
+    }
+
+    #[test]
+    fn an_mcu_stuck_on_an_info_frame_is_frozen() {
+        let mut b = Bridge::new(BridgeConfig::DEFAULT);
+        let mut l = Ladder::new(Config::DEFAULT);
+        b.arm(0);
+        for k in 0..50u64 {
+            exchange(&mut b, &mut l, k * 1000);
+        }
+        let info = McuInfo::default();
+        for k in 50..60u64 {
+            exchange_info(&mut b, &mut l, k * 1000, info);
+        }
+        assert_eq!(b.state(), ArmState::Latched);
+        assert!(b.drain().iter().any(|(_, d)| *d == Diagnostic::McuFrozen));
     }
 
     #[test]

@@ -56,8 +56,8 @@ impl<T: Transport> Link<T> {
         let t_recv = self.now_us();
         match r {
             Ok(()) => {
-                let fb = amr::decode_feedback(&rx);
-                self.bridge.on_feedback(t_send, t_recv, cmd.seq, fb);
+                let frame = amr::decode_mcu_frame(&rx);
+                self.bridge.on_frame(t_send, t_recv, cmd.seq, frame);
                 Ok(self.bridge.drain())
             }
             Err(e) => {
@@ -110,5 +110,28 @@ mod tests {
         .unwrap();
         assert!(names.contains(&"feedback_rejected"));
         assert!(names.contains(&"mcu_frozen"), "{names:?}");
+    }
+
+    #[test]
+    fn an_info_frame_in_the_feedback_slot_reaches_the_bridge_as_info() {
+        let info = amr::McuInfo {
+            fw_version: amr::pack_fw_version(0, 3, 1),
+            reset_cause: amr::ResetCause::PowerOn,
+            ..Default::default()
+        };
+        let mut reply = [0u8; FRAME_LEN];
+        amr::encode_info(&info, &mut reply);
+        let mut l = Link::new(
+            NullTransport {
+                reply: reply.to_vec(),
+            },
+            Bridge::new(BridgeConfig::DEFAULT),
+        );
+        for _ in 0..3 {
+            l.exchange().unwrap();
+        }
+        assert_eq!(l.bridge.mcu_info(), Some(info));
+        assert_eq!(l.bridge.stats.info_frames, 3);
+        assert_eq!(l.bridge.stats.feedback_rejected, 0);
     }
 }

@@ -359,6 +359,9 @@ fn monitor(
     }
     let t = open_spi(device, speed)?;
     let mut link = Link::new(Boxed(t), Bridge::new(BridgeConfig::DEFAULT));
+    // Who answers: the first command asks for the MCU's identity (printed when it arrives).
+    link.bridge.request_identity();
+    let mut info = None;
     let mut last_print = 0u64;
     let end = std::time::Instant::now()
         .checked_add(secs(seconds))
@@ -369,6 +372,10 @@ fn monitor(
             out!("{}", serde_json::json!({"t_us": t, "diagnostic": d}));
         }
         let now = link.now_us();
+        if link.bridge.mcu_info() != info {
+            info = link.bridge.mcu_info();
+            out!("{}", serde_json::json!({"t_us": now, "mcu_info": info}));
+        }
         if now.saturating_sub(last_print) >= 100_000 {
             last_print = now;
             if let Some(fb) = link.bridge.last_feedback {
