@@ -1,4 +1,5 @@
-//! The frame tools behind `motorlink decode` and `motorlink encode`: every seed's frames to and from JSON.
+//! The frame tools behind `motorlink decode` and `motorlink encode`: every seed's frames to and from JSON
+//! (and, in [`info`], `motorlink info`: the MCU's identity from a capture or a live link).
 //!
 //! Each function returns the text to print or an error message that names the problem and the fix;
 //! none panics, whatever the input. The JSON shapes are listed in [`SHAPES`] (printed by
@@ -8,6 +9,8 @@
 use protocol::{amr, cdc, pi_spi, teensy};
 use serde::{Deserialize, Serialize};
 use statemachine::{Estop, RejectReason};
+
+pub mod info;
 
 /// The frame kinds of every seed protocol.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]

@@ -127,6 +127,31 @@ enum Cmd {
         #[arg(long, default_value_t = 10)]
         count: u32,
     },
+    /// Print the MCU's firmware identity and reset cause (seed 000 McuInfo), from a capture or live.
+    ///
+    /// --capture FILE reads a binary file of concatenated 64-byte MISO frames (one per CS-low period,
+    /// as a logic analyser or spidev records them) and prints every McuInfo frame in it. --device
+    /// asks the MCU: it sends commands with request = 1 and the drive disabled (enable 0, speeds 0,
+    /// mode 0), one per millisecond, until an McuInfo comes back or --timeout-ms passes. Exit status
+    /// 2 with the reason if none is found.
+    #[command(group(clap::ArgGroup::new("source").required(true).args(["capture", "device"])))]
+    Info {
+        /// Binary capture of feedback-slot frames (MISO), 64 bytes each, starting at a frame boundary.
+        #[arg(long, value_name = "FILE")]
+        capture: Option<PathBuf>,
+        /// spidev device to ask (e.g. /dev/spidev0.0); the drive is disabled while it runs.
+        #[arg(long, value_name = "DEVICE")]
+        device: Option<String>,
+        /// SPI clock, Hz (--device).
+        #[arg(long, default_value_t = 2_000_000)]
+        speed: u32,
+        /// Give up after this long, ms (one exchange per ms; --device).
+        #[arg(long, default_value_t = 200)]
+        timeout_ms: u32,
+        /// Print JSON instead of text.
+        #[arg(long)]
+        json: bool,
+    },
     /// Measure the 1 kHz loop's period and deadline misses on this machine (no device needed).
     LoopBench {
         /// How long, s.
@@ -430,6 +455,35 @@ fn ping(device: &str, kind: Kind, speed: u32, count: u32) -> Result<(), String> 
     Ok(())
 }
 
+fn info(
+    capture: Option<&Path>,
+    device: Option<&str>,
+    speed: u32,
+    timeout_ms: u32,
+    json: bool,
+) -> Result<(), String> {
+    let text = if let Some(path) = capture {
+        cli::info::info_capture_file(path, json)?
+    } else if let Some(device) = device {
+        let mut spi = SpiTransport::open(device, speed).map_err(|e| e.to_string())?;
+        let mut pacer = Pacer::contract();
+        let t0 = Instant::now();
+        // A start that differs from run to run; the query moves past the MCU's last accepted seq anyway.
+        let first_seq = std::time::SystemTime::now()
+            .duration_since(std::time::UNIX_EPOCH)
+            .map_or(1, |d| d.subsec_nanos() | 1);
+        let exchanges = usize::try_from(timeout_ms.max(1)).unwrap_or(usize::MAX);
+        cli::info::info_live(&mut spi, first_seq, exchanges, json, || {
+            pacer.wait();
+            u32::try_from(t0.elapsed().as_micros() & u128::from(u32::MAX)).unwrap_or(0)
+        })?
+    } else {
+        return Err("give --capture FILE or --device /dev/spidevX.Y".into());
+    };
+    out!("{text}");
+    Ok(())
+}
+
 fn loop_bench(seconds: f64) -> Result<(), String> {
     // The same work as on the robot (IK, encode, decode, checks), against a device that answers
     // a valid feedback frame instantly.
@@ -502,6 +556,20 @@ fn main() -> ExitCode {
             speed,
             count,
         } => ping(&device, kind, speed, count).map(|()| true),
+        Cmd::Info {
+            capture,
+            device,
+            speed,
+            timeout_ms,
+            json,
+        } => info(
+            capture.as_deref(),
+            device.as_deref(),
+            speed,
+            timeout_ms,
+            json,
+        )
+        .map(|()| true),
         Cmd::LoopBench { seconds } => loop_bench(seconds).map(|()| true),
     };
     match r {

@@ -791,3 +791,313 @@ fn no_input_makes_any_decoder_panic() {
         }
     }
 }
+
+// ---- motorlink info: McuInfo from a capture and from a (simulated) live link ----
+
+mod info_cmd {
+    use super::*;
+    use crate::cli::info::{info_capture_file, info_live, query_info, scan_capture, QueryError};
+    use crate::transport::{LinkError, Transport};
+    use protocol::amr::{
+        BoardProfile, McuInfo, MotorFeedback, ResetCause, FRAME_LEN, REQUEST_IDENTITY,
+    };
+    use statemachine::validate::seq_is_newer;
+
+    fn identity() -> McuInfo {
+        McuInfo {
+            fw_version: amr::pack_fw_version(1, 4, 2),
+            git_hash: 0x8624_B25F,
+            board: BoardProfile::AmrSpi,
+            build_date: 20_261_130,
+            reset_cause: ResetCause::IndependentWatchdog,
+            reset_count: 3,
+            panic_line: 0,
+            seq: 1042,
+            dirty: true,
+        }
+    }
+
+    fn feedback_frame(seq: u32) -> [u8; FRAME_LEN] {
+        let mut f = [0u8; FRAME_LEN];
+        let fb = MotorFeedback {
+            timestamp_us: seq * 1000,
+            left_speed: -2.0,
+            left_current: -3.25,
+            seq,
+            cmd_seq: seq - 1,
+            ..MotorFeedback::default()
+        };
+        amr::encode_feedback(&fb, &mut f);
+        f
+    }
+
+    /// Feedback 1040, 1041, the info frame (seq 1042), a corrupted feedback, feedback 1044, and
+    /// 10 stray bytes: what a logic analyser gives while the host asks once.
+    fn capture() -> Vec<u8> {
+        let mut bytes = Vec::new();
+        bytes.extend_from_slice(&feedback_frame(1040));
+        bytes.extend_from_slice(&feedback_frame(1041));
+        let mut info = [0u8; FRAME_LEN];
+        amr::encode_info(&identity(), &mut info);
+        bytes.extend_from_slice(&info);
+        let mut bad = feedback_frame(1043);
+        bad[9] ^= 0x04;
+        bytes.extend_from_slice(&bad);
+        bytes.extend_from_slice(&feedback_frame(1044));
+        bytes.extend_from_slice(&[0xAB; 10]);
+        bytes
+    }
+
+    fn write_temp(name: &str, bytes: &[u8]) -> std::path::PathBuf {
+        let path =
+            std::env::temp_dir().join(format!("motorlink-info-{}-{name}.bin", std::process::id()));
+        std::fs::write(&path, bytes).unwrap();
+        path
+    }
+
+    #[test]
+    fn a_capture_file_prints_the_identity_in_human_form() {
+        let path = write_temp("human", &capture());
+        let text = info_capture_file(&path, false).unwrap();
+        std::fs::remove_file(&path).unwrap();
+        for needle in [
+            "McuInfo at frame 2",
+            "firmware     1.4.2 (git 8624b25f, built from a tree with uncommitted changes)",
+            "board        AmrSpi (seed 000, Jetson SPI)",
+            "built        2026-11-30",
+            "reset cause  IndependentWatchdog (code 3)",
+            "resets       3 since power-on",
+            "last panic   none recorded",
+            "seq          1042",
+            "capture: 5 frames of 64 bytes: 3 feedback, 1 McuInfo, refused: 1 Crc, 10 bytes after the last whole frame",
+        ] {
+            assert!(text.contains(needle), "`{needle}` missing from:\n{text}");
+        }
+    }
+
+    #[test]
+    fn a_capture_file_prints_the_identity_as_json() {
+        let path = write_temp("json", &capture());
+        let text = info_capture_file(&path, true).unwrap();
+        std::fs::remove_file(&path).unwrap();
+        let v: Value = serde_json::from_str(&text).unwrap();
+        assert_eq!(v["frames"], 5);
+        assert_eq!(v["feedback"], 3);
+        assert_eq!(v["info"], 1);
+        assert_eq!(v["refused"], json!({"Crc": 1}));
+        assert_eq!(v["trailing_bytes"], 10);
+        let ids = v["identities"].as_array().unwrap();
+        assert_eq!(ids.len(), 1);
+        let id = &ids[0];
+        assert_eq!(id["frame"], 2);
+        assert_eq!(id["fw_version"], "1.4.2");
+        assert_eq!(id["fw_version_raw"], 0x0001_0402);
+        assert_eq!(id["git_hash"], "8624b25f");
+        assert_eq!(id["dirty"], true);
+        assert_eq!(id["board"], "amr_spi");
+        assert_eq!(id["build_date"], "2026-11-30");
+        assert_eq!(id["reset_cause"], "independent_watchdog");
+        assert_eq!(id["reset_cause_code"], 3);
+        assert_eq!(id["reset_count"], 3);
+        assert_eq!(id["panic_line"], Value::Null);
+        assert_eq!(id["seq"], 1042);
+    }
+
+    #[test]
+    fn a_reset_during_the_capture_shows_as_a_second_identity() {
+        let mut bytes = capture();
+        bytes.truncate(5 * FRAME_LEN);
+        let mut f = [0u8; FRAME_LEN];
+        amr::encode_info(
+            &McuInfo {
+                seq: 1045,
+                ..identity()
+            },
+            &mut f,
+        );
+        bytes.extend_from_slice(&f); // the same identity again: counted, not repeated
+        let panic = McuInfo {
+            reset_cause: ResetCause::Panic,
+            reset_count: 4,
+            panic_line: 212,
+            seq: 1,
+            git_hash: 0,
+            ..identity()
+        };
+        amr::encode_info(&panic, &mut f);
+        bytes.extend_from_slice(&f);
+        let scan = scan_capture(&bytes);
+        assert_eq!(scan.info, 3);
+        assert_eq!(scan.identities.len(), 2);
+        assert_eq!(scan.identities[0].frames, 2);
+        assert_eq!(scan.identities[1].frame, 6);
+        assert_eq!(scan.identities[1].panic_line, Some(212));
+        assert_eq!(scan.identities[1].git_hash, None);
+        let path = write_temp("reset", &bytes);
+        let text = info_capture_file(&path, false).unwrap();
+        std::fs::remove_file(&path).unwrap();
+        assert!(
+            text.contains("McuInfo at frame 2, and 1 more like it"),
+            "{text}"
+        );
+        assert!(text.contains("reset cause  Panic (code 4)"), "{text}");
+        assert!(text.contains("last panic   at line 212"), "{text}");
+        assert!(text.contains("git hash unknown"), "{text}");
+        assert!(text.contains("the MCU reset or was reflashed"), "{text}");
+    }
+
+    #[test]
+    fn a_capture_without_an_info_frame_is_an_error_that_says_what_it_held() {
+        let mut bytes = Vec::new();
+        bytes.extend_from_slice(&feedback_frame(7));
+        bytes.extend_from_slice(&[0u8; FRAME_LEN]);
+        let path = write_temp("none", &bytes);
+        let e = info_capture_file(&path, false).unwrap_err();
+        std::fs::remove_file(&path).unwrap();
+        assert!(e.contains("no McuInfo frame in"), "{e}");
+        assert!(
+            e.contains("2 frames of 64 bytes: 1 feedback, 0 McuInfo, refused: 1 Crc"),
+            "{e}"
+        );
+        assert!(e.contains("request = 1"), "{e}");
+        // Too short for a frame.
+        let e = crate::cli::info::info_capture("tiny.bin", &[1, 2, 3], false).unwrap_err();
+        assert!(e.contains("no whole 64-byte frame (3 bytes)"), "{e}");
+        // A missing file.
+        let e =
+            info_capture_file(std::path::Path::new("/nonexistent/capture.bin"), false).unwrap_err();
+        assert!(e.contains("cannot read /nonexistent/capture.bin"), "{e}");
+    }
+
+    #[test]
+    fn a_misaligned_capture_names_the_offset_to_drop() {
+        let mut bytes = vec![0x55; 7];
+        bytes.extend_from_slice(&capture());
+        let e = crate::cli::info::info_capture("shifted.bin", &bytes, false).unwrap_err();
+        assert!(e.contains("drop its first 7 bytes"), "{e}");
+    }
+
+    /// An MCU as the firmware behaves on the link: the frame it returns was prepared after the
+    /// previous exchange; a command is accepted only with a newer `seq`, and an accepted command
+    /// with `request` = 1 makes the next frame an `McuInfo` (if the firmware knows the request).
+    struct FakeMcu {
+        accepted: u32,
+        fb_seq: u32,
+        info_next: bool,
+        knows_identity: bool,
+        commands: Vec<amr::MotorCommand>,
+    }
+
+    impl FakeMcu {
+        fn new(accepted: u32, knows_identity: bool) -> Self {
+            Self {
+                accepted,
+                fb_seq: 1040,
+                info_next: false,
+                knows_identity,
+                commands: Vec::new(),
+            }
+        }
+    }
+
+    impl Transport for FakeMcu {
+        fn exchange(&mut self, tx: &[u8], rx: &mut [u8]) -> Result<(), LinkError> {
+            self.fb_seq += 1;
+            let mut out = [0u8; FRAME_LEN];
+            if self.info_next {
+                let info = McuInfo {
+                    seq: self.fb_seq,
+                    ..identity()
+                };
+                amr::encode_info(&info, &mut out);
+            } else {
+                let mut f = feedback_frame(self.fb_seq);
+                let mut fb = amr::decode_feedback(&f).unwrap();
+                fb.cmd_seq = self.accepted;
+                amr::encode_feedback(&fb, &mut f);
+                out = f;
+            }
+            rx.copy_from_slice(&out);
+            self.info_next = false;
+            let cmd = amr::decode_command(tx.try_into().unwrap()).unwrap();
+            self.commands.push(cmd);
+            if seq_is_newer(cmd.seq, self.accepted) {
+                self.accepted = cmd.seq;
+                self.info_next = self.knows_identity && cmd.request == REQUEST_IDENTITY;
+            }
+            Ok(())
+        }
+
+        fn name(&self) -> &str {
+            "fake-mcu"
+        }
+    }
+
+    #[test]
+    fn live_query_moves_past_a_stale_seq_and_reads_the_answer() {
+        // The MCU last accepted seq 5000; the query starts at 10, which it refuses as stale.
+        let mut mcu = FakeMcu::new(5000, true);
+        let mut paced = 0;
+        let (id, log) = query_info(&mut mcu, 10, 50, || {
+            paced += 1;
+            paced * 1000
+        })
+        .unwrap();
+        assert_eq!(id.fw_version, "1.4.2");
+        assert_eq!(id.reset_cause, ResetCause::IndependentWatchdog);
+        assert_eq!(id.seq, 1043);
+        // 10 refused as stale, 5001 accepted with the request, the answer on the next exchange.
+        assert_eq!(log.exchanges, 3);
+        assert_eq!(paced, 3);
+        assert_eq!(log.feedback, 2);
+        let seqs: Vec<u32> = mcu.commands.iter().map(|c| c.seq).collect();
+        assert_eq!(seqs, [10, 5001, 5002]);
+        // Every command asks, with the drive disabled.
+        for c in &mcu.commands {
+            assert_eq!(c.request, REQUEST_IDENTITY);
+            assert!(!c.enable);
+            assert_eq!(
+                (c.left_speed_cmd, c.right_speed_cmd, c.control_mode),
+                (0.0, 0.0, 0)
+            );
+        }
+        let mut mcu = FakeMcu::new(0, true);
+        let text = info_live(&mut mcu, 1, 50, true, || 0).unwrap();
+        let v: Value = serde_json::from_str(&text).unwrap();
+        assert_eq!(v["device"], "fake-mcu");
+        assert_eq!(v["identity"]["git_hash"], "8624b25f");
+        assert_eq!(v["query"]["exchanges"], 2);
+    }
+
+    #[test]
+    fn live_query_times_out_with_what_came_back() {
+        let mut old_firmware = FakeMcu::new(0, false);
+        let e = info_live(&mut old_firmware, 1, 20, false, || 0).unwrap_err();
+        assert!(
+            e.contains("no McuInfo from fake-mcu in 20 exchanges: 20 feedback")
+                && e.contains("does not know the identity request"),
+            "{e}"
+        );
+        let mut silent = crate::transport::NullTransport {
+            reply: vec![0; FRAME_LEN],
+        };
+        let e = info_live(&mut silent, 1, 20, false, || 0).unwrap_err();
+        assert!(
+            e.contains("0 feedback, refused: 20 Crc") && e.contains("check the wiring"),
+            "{e}"
+        );
+        struct Broken;
+        impl Transport for Broken {
+            fn exchange(&mut self, _: &[u8], _: &mut [u8]) -> Result<(), LinkError> {
+                Err(LinkError::Timeout("broken".into(), 0))
+            }
+            fn name(&self) -> &str {
+                "broken"
+            }
+        }
+        assert!(matches!(
+            query_info(&mut Broken, 1, 5, || 0),
+            Err(QueryError::Transport(m)) if m.contains("broken")
+        ));
+    }
+}
