@@ -15,9 +15,17 @@
 //! limits keep every precomputed ratio inside Q16.16 and every sum inside `i64`; the bounds are
 //! spelled out at [`DiffDrive::new`]. The `i64` operations are written saturating so that no
 //! arithmetic can wrap or panic even if those bounds were wrong; with them, none saturates.
+//!
+//! These are the only copies of the formulas in the workspace: the host's 1 kHz bridge computes
+//! its wheel commands from cmd_vel with [`DiffDrive::inverse_unrounded`] (and applies its own
+//! limit policy in f64), and the simulator's plant relates its body velocity and its wheel speeds
+//! with [`DiffDrive::inverse_unrounded`] and [`DiffDrive::forward`].
 
 use crate::{Meters, MetersPerSecond, Q};
 use statemachine::Speed;
+
+/// A sum of products of Q16.16 values before its rounding: Q32.32, exact.
+pub type Q32 = fixed::types::I32F32;
 
 const MIN_RADIUS: Q = Q::lit("0.001");
 const MAX_RADIUS: Q = Q::const_from_int(10);
@@ -71,35 +79,37 @@ fn wide(a: Q, b: Q) -> i64 {
 }
 
 impl DiffDrive {
-    /// Checks the geometry and precomputes the ratios.
+    /// Checks the geometry and precomputes the ratios. A `const fn`, so a fixed geometry can be a
+    /// constant that is checked at compile time.
     ///
     /// With 1 mm ≤ r ≤ 10 m and 1 cm ≤ L ≤ 64 m: 1/r ≤ 1000, L/(2r) ≤ 32 000, r/2 ≤ 5 and r/L ≤ 1000
     /// all fit Q16.16 (< 32 768). The conversions then stay inside `i64`:
     /// - inverse: |v·(1/r)| < 2³¹·1000·2¹⁶ < 2⁵⁷ and |ω·L/(2r)| < 2³¹·32 000·2¹⁶ < 2⁶², sum < 2⁶³ − 2¹⁵;
     /// - forward: |ω_L + ω_R| ≤ 2³², times r/2 < 2²⁰ or r/L < 2²⁶ stays below 2⁵⁸.
-    pub fn new(wheelbase: Meters, wheel_radius: Meters) -> Result<Self, KinematicsError> {
-        if wheel_radius < MIN_RADIUS || wheel_radius > MAX_RADIUS {
+    pub const fn new(wheelbase: Meters, wheel_radius: Meters) -> Result<Self, KinematicsError> {
+        let (base, radius) = (wheelbase.to_bits(), wheel_radius.to_bits());
+        if radius < MIN_RADIUS.to_bits() || radius > MAX_RADIUS.to_bits() {
             return Err(KinematicsError::WheelRadius);
         }
-        if wheelbase < MIN_BASE || wheelbase > MAX_BASE {
+        if base < MIN_BASE.to_bits() || base > MAX_BASE.to_bits() {
             return Err(KinematicsError::Wheelbase);
         }
         // Both divisors are checked non-zero above and every quotient fits Q16.16 (bounds above).
-        let inv_radius = Q::ONE
-            .checked_div(wheel_radius)
-            .ok_or(KinematicsError::WheelRadius)?;
-        let half_base_over_radius = Q::from_bits(wheelbase.to_bits() >> 1)
-            .checked_div(wheel_radius)
-            .ok_or(KinematicsError::Wheelbase)?;
-        let radius_over_base = wheel_radius
-            .checked_div(wheelbase)
-            .ok_or(KinematicsError::Wheelbase)?;
+        let Some(inv_radius) = Q::ONE.checked_div(wheel_radius) else {
+            return Err(KinematicsError::WheelRadius);
+        };
+        let Some(half_base_over_radius) = Q::from_bits(base >> 1).checked_div(wheel_radius) else {
+            return Err(KinematicsError::Wheelbase);
+        };
+        let Some(radius_over_base) = wheel_radius.checked_div(wheelbase) else {
+            return Err(KinematicsError::Wheelbase);
+        };
         Ok(Self {
             wheelbase,
             radius: wheel_radius,
             inv_radius,
             half_base_over_radius,
-            half_radius: Q::from_bits(wheel_radius.to_bits() >> 1),
+            half_radius: Q::from_bits(radius >> 1),
             radius_over_base,
         })
     }
@@ -117,11 +127,21 @@ impl DiffDrive {
     /// Wheel speeds `[left, right]` (rad/s) for a body twist, each rounded once to the nearest
     /// Q16.16 value and clamped to the Q16.16 range.
     pub fn inverse(&self, t: Twist) -> [Speed; 2] {
+        let [l, r] = self.inverse_unrounded(t);
+        [round_q(l.to_bits()), round_q(r.to_bits())]
+    }
+
+    /// Wheel speeds `[left, right]` (rad/s) for a body twist before [`DiffDrive::inverse`] rounds
+    /// and clamps them: the exact value of the formula with the twist and the precomputed ratios,
+    /// as Q32.32. Never clamped: |ω| < 2³¹ rad/s for every twist and geometry (bounds at
+    /// [`DiffDrive::new`]). For a caller that limits the wheel speeds by its own policy and must
+    /// not see a clamp first (a clamp of one wheel would change the path's curvature).
+    pub fn inverse_unrounded(&self, t: Twist) -> [Q32; 2] {
         let straight = wide(t.v, self.inv_radius);
         let turn = wide(t.omega, self.half_base_over_radius);
         [
-            round_q(straight.saturating_sub(turn)),
-            round_q(straight.saturating_add(turn)),
+            Q32::from_bits(straight.saturating_sub(turn)),
+            Q32::from_bits(straight.saturating_add(turn)),
         ]
     }
 
@@ -268,6 +288,38 @@ mod tests {
                 }
             }
         }
+    }
+
+    /// The unrounded wheel speeds are the exact sums, also where the rounded ones clamp, and
+    /// rounding them gives `inverse`.
+    #[test]
+    fn unrounded_is_exact_and_rounds_to_inverse() {
+        let edges = [Q::MIN, Q::from_bits(-1), Q::ZERO, Q::DELTA, Q::MAX];
+        for (base, radius) in [(64.0, 0.001), (0.01, 10.0), (0.42, 0.075)] {
+            let k = DiffDrive::new(q(base), q(radius)).unwrap();
+            let ratio = |x: Q| i128::from(x.to_bits());
+            for v in edges {
+                for w in edges {
+                    let t = Twist { v, omega: w };
+                    let [l, r] = k.inverse_unrounded(t);
+                    let straight = ratio(v) * ratio(k.inv_radius);
+                    let turn = ratio(w) * ratio(k.half_base_over_radius);
+                    assert_eq!(i128::from(l.to_bits()), straight - turn);
+                    assert_eq!(i128::from(r.to_bits()), straight + turn);
+                    assert_eq!(k.inverse(t), [round_q(l.to_bits()), round_q(r.to_bits())]);
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn a_fixed_geometry_is_a_constant() {
+        const AMR: Result<DiffDrive, KinematicsError> =
+            DiffDrive::new(Q::lit("0.40"), Q::lit("0.08"));
+        assert_eq!(AMR, DiffDrive::new(q(0.40), q(0.08)));
+        const TOO_SMALL: Result<DiffDrive, KinematicsError> =
+            DiffDrive::new(Q::lit("0.40"), Q::lit("0.0005"));
+        assert_eq!(TOO_SMALL, Err(KinematicsError::WheelRadius));
     }
 
     /// One rounding per output: against the exact real-number formula with the precomputed ratios,
