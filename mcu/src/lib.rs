@@ -29,6 +29,7 @@
     )
 )]
 
+pub mod boot;
 pub mod current;
 pub mod estop;
 pub mod hw;

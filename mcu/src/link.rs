@@ -3,23 +3,40 @@
 //!
 //! A frame never moves the drive (the tick is the only event that changes the setpoint, INV-8),
 //! so this task does not touch the bridge: the next tick applies whatever the ladder decided.
+//!
+//! A command whose `request` is [`REQUEST_IDENTITY`] is answered in the next feedback slot with
+//! an [`McuInfo`] frame (firmware identity, reset cause) instead of a `MotorFeedback`; it takes
+//! that slot's sequence number. The request is honoured for any frame that decoded, whether or
+//! not the ladder accepted its command: answering reads nothing the ladder decides.
 
 use crate::safety::Safety;
 use crate::Measurements;
-use protocol::amr::{decode_command, encode_feedback, MotorFeedback, FRAME_LEN};
+use protocol::amr::{
+    decode_command, encode_feedback, encode_info, McuInfo, MotorFeedback, FRAME_LEN,
+    REQUEST_IDENTITY,
+};
 use statemachine::Output;
 
-/// The link task's own state: the feedback sequence and the last accepted command's sequence.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+/// The link task's own state: the feedback sequence, the last accepted command's sequence, and
+/// the identity it answers with.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct LinkTask {
     seq: u32,
     cmd_seq: u32,
+    identity: McuInfo,
+    identity_requested: bool,
 }
 
 impl LinkTask {
-    /// Before the first frame.
-    pub const fn new() -> Self {
-        Self { seq: 0, cmd_seq: 0 }
+    /// Before the first frame; `identity` is what an identity request is answered with (its
+    /// `seq` is filled in when sent).
+    pub const fn new(identity: McuInfo) -> Self {
+        Self {
+            seq: 0,
+            cmd_seq: 0,
+            identity,
+            identity_requested: false,
+        }
     }
 
     /// One transaction: hands the received frame to the ladder, then writes the next feedback
@@ -43,6 +60,12 @@ impl LinkTask {
     pub fn receive(&mut self, safety: &mut Safety, frame: &[u8; FRAME_LEN]) -> Output {
         let decoded = decode_command(frame);
         let seq = decoded.as_ref().map_or(0, |c| c.seq);
+        if decoded
+            .as_ref()
+            .is_ok_and(|c| c.request == REQUEST_IDENTITY)
+        {
+            self.identity_requested = true;
+        }
         let before = safety.ladder().counters().valid_frames;
         let out = safety.step(protocol::event_from(decoded.map(|c| c.to_command())));
         if safety.ladder().counters().valid_frames != before {
@@ -51,7 +74,8 @@ impl LinkTask {
         out
     }
 
-    /// Builds the feedback frame for the next transaction. Not inlined, for the budget report.
+    /// Builds the feedback frame for the next transaction, or the identity if the last frame
+    /// asked for it. Not inlined, for the budget report.
     #[inline(never)]
     pub fn feedback(
         &mut self,
@@ -61,6 +85,15 @@ impl LinkTask {
         tx: &mut [u8; FRAME_LEN],
     ) {
         self.seq = self.seq.wrapping_add(1);
+        if self.identity_requested {
+            self.identity_requested = false;
+            let info = McuInfo {
+                seq: self.seq,
+                ..self.identity
+            };
+            encode_info(&info, tx);
+            return;
+        }
         let [sl, sr] = m.speeds;
         let [il, ir] = m.currents;
         let [el, er] = m.encoders;

@@ -12,8 +12,23 @@ use mcu::hw::RecordingBridge;
 use mcu::tick::TickInputs;
 use mcu::tuning::AMR;
 use mcu::{CurrentLoop, EstopInput, LinkTask, Measurements, Safety, SpeedLoop, TickTask};
-use protocol::amr::{decode_feedback, encode_command, MotorCommand, FRAME_LEN};
+use protocol::amr::{
+    decode_feedback, decode_mcu_frame, encode_command, BoardProfile, McuFrame, McuInfo,
+    MotorCommand, ResetCause, FRAME_LEN, REQUEST_IDENTITY,
+};
 use statemachine::{Drive, Mode, Speed};
+
+const IDENTITY: McuInfo = McuInfo {
+    fw_version: 0x0001_0203,
+    git_hash: 0xdead_beef,
+    board: BoardProfile::AmrSpi,
+    build_date: 20261130,
+    reset_cause: ResetCause::Panic,
+    reset_count: 3,
+    panic_line: 42,
+    seq: 0,
+    dirty: false,
+};
 
 /// The board's task state, stepped at the board's rates.
 struct Board {
@@ -34,7 +49,7 @@ impl Board {
     fn new() -> Self {
         Self {
             safety: Safety::new(AMR.ladder),
-            link: LinkTask::new(),
+            link: LinkTask::new(IDENTITY),
             tick: TickTask::new(&AMR),
             speed: SpeedLoop::new(&AMR, [0, 0]),
             current: CurrentLoop::new(&AMR, [AMR.adc_zero; 2]),
@@ -48,6 +63,10 @@ impl Board {
     }
 
     fn frame(&mut self, left: f32, right: f32, enable: bool, now_us: u32) {
+        self.frame_asking(left, right, enable, now_us, 0);
+    }
+
+    fn frame_asking(&mut self, left: f32, right: f32, enable: bool, now_us: u32, request: u32) {
         self.seq += 1;
         let mut f = [0u8; FRAME_LEN];
         encode_command(
@@ -58,7 +77,7 @@ impl Board {
                 control_mode: 1,
                 enable,
                 seq: self.seq,
-                request: 0,
+                request,
             },
             &mut f,
         );
@@ -300,4 +319,34 @@ fn the_trace_records_the_arming_and_the_comm_loss() {
     assert!(records.iter().any(
         |r| matches!(r, Record::Latched(c) if c.contains(statemachine::FaultFlags::COMM_LOST))
     ));
+}
+
+#[test]
+fn an_identity_request_is_answered_in_the_next_slot_and_only_there() {
+    let mut b = Board::new();
+    b.frame(0.0, 0.0, false, 0);
+    let first = decode_feedback(&b.tx).unwrap();
+    b.frame_asking(0.0, 0.0, false, 0, REQUEST_IDENTITY);
+    let McuFrame::Info(info) = decode_mcu_frame(&b.tx).unwrap() else {
+        panic!(
+            "no identity in the slot after the request: {:?}",
+            decode_mcu_frame(&b.tx)
+        );
+    };
+    assert_eq!(
+        info,
+        McuInfo {
+            seq: first.seq + 1,
+            ..IDENTITY
+        }
+    );
+    // The frame itself still reached the ladder, and the next slot is feedback again, numbered on.
+    assert_eq!(b.safety.ladder().counters().valid_frames, 2);
+    b.frame(0.0, 0.0, false, 0);
+    let next = decode_feedback(&b.tx).unwrap();
+    assert_eq!(next.seq, first.seq + 2);
+    // An unknown request value is ignored, the command still applies.
+    b.frame_asking(0.0, 0.0, false, 0, 7);
+    assert!(decode_feedback(&b.tx).is_ok());
+    assert_eq!(b.safety.ladder().counters().valid_frames, 4);
 }

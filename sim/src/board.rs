@@ -18,10 +18,13 @@ use mcu::hw::RecordingBridge;
 use mcu::tick::{Runs, TickInputs};
 use mcu::tuning::Tuning;
 use mcu::{Bridge, CurrentLoop, EstopInput, LinkTask, Measurements, Safety, SpeedLoop, TickTask};
-use protocol::amr::FRAME_LEN;
+use protocol::amr::{pack_fw_version, BoardProfile, McuInfo, ResetCause, FRAME_LEN};
 use statemachine::{Output, Speed};
 
 use crate::plant::BridgeDrive;
+
+/// The simulated firmware's version: the board application's.
+const FW_VERSION: u32 = pack_fw_version(0, 1, 0);
 
 /// Counts of the board's tick timer per 1 ms tick (TIM2 at 84 MHz, prescaler 2).
 pub const TICK_COUNTS: u32 = 42_000;
@@ -82,9 +85,10 @@ pub struct SimBoard {
 
 impl SimBoard {
     /// A board just out of reset (BRAKE latched, POWER_ON) with the encoder counters reading
-    /// `counts`. Zero-current offsets are calibrated as the firmware does: the mean reading
-    /// with the bridge braked, which here is the nominal bias.
-    pub fn new(tuning: Tuning, counts: [u16; 2]) -> Self {
+    /// `counts`; `reset` is why it started and how many resets came since power-on, as the
+    /// firmware reports them in its identity. Zero-current offsets are calibrated as the firmware
+    /// does: the mean reading with the bridge braked, which here is the nominal bias.
+    pub fn new(tuning: Tuning, counts: [u16; 2], reset: (ResetCause, u32)) -> Self {
         let safety = Safety::new(tuning.ladder);
         let arr = tuning.pwm_arr().unwrap_or(1);
         let offsets = [tuning.adc_zero; 2];
@@ -92,7 +96,13 @@ impl SimBoard {
             tuning,
             out: safety.output(),
             safety,
-            link: LinkTask::new(),
+            link: LinkTask::new(McuInfo {
+                fw_version: FW_VERSION,
+                board: BoardProfile::AmrSpi,
+                reset_cause: reset.0,
+                reset_count: reset.1,
+                ..McuInfo::default()
+            }),
             tick: TickTask::new(&tuning),
             speed: SpeedLoop::new(&tuning, counts),
             current: CurrentLoop::new(&tuning, offsets),

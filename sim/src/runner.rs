@@ -11,7 +11,7 @@
 use std::io::Write;
 use std::time::Instant;
 
-use protocol::amr::FRAME_LEN;
+use protocol::amr::{ResetCause, FRAME_LEN};
 use statemachine::{FaultFlags, Mode};
 
 use crate::board::SimBoard;
@@ -259,7 +259,7 @@ pub fn run<H: HostModel>(
         ..mcu::tuning::AMR
     };
     let counters = |pl: &Plant| [pl.encoder_counter(0), pl.encoder_counter(1)];
-    let mut mcu = SimBoard::new(tuning, counters(&plant));
+    let mut mcu = SimBoard::new(tuning, counters(&plant), (ResetCause::PowerOn, 0));
     let mut last_feed = 0.0f64;
     // The stamp of the feedback in the MCU's tx buffer: (MCU µs, true time).
     let mut stamp: Option<(u64, f64)> = None;
@@ -372,7 +372,11 @@ pub fn run<H: HostModel>(
                 // restarts latched in BRAKE (POWER_ON). One freeze per scenario.
                 frozen_since = None;
                 freeze_done = true;
-                mcu = SimBoard::new(tuning, counters(&plant));
+                mcu = SimBoard::new(
+                    tuning,
+                    counters(&plant),
+                    (ResetCause::IndependentWatchdog, 1),
+                );
                 last_feed = t;
                 stamp = None;
             }
