@@ -28,7 +28,9 @@ def decode_feedback(frame: bytes) -> dict:
         raise ValueError("CRC")
     n = frame[0]
     p, i, out = frame[1:1 + n], 0, {}
-    names = {1: "timestamp_us", 8: "fault_flags", 10: "seq", 11: "mode", 12: "cmd_seq", 13: "version"}
+    names = {1: "timestamp_us", 8: "fault_flags", 10: "seq", 11: "mode", 12: "cmd_seq", 13: "version",
+             16: "info_version", 17: "fw_version", 18: "git_hash", 19: "board", 20: "build_date",
+             21: "reset_cause", 22: "reset_count", 23: "panic_line", 24: "info_seq", 25: "dirty"}
     while i < len(p):
         key, i = varint(p, i)
         field, wt = key >> 3, key & 7
@@ -56,16 +58,40 @@ def varint(b: bytes, i: int):
             return v, i
 
 
-def check_feedback(path: str, rows: list) -> list:
+def check_feedback(path: str, rows: list, git_hash: str) -> list:
     fails = []
     data = open(path, "rb").read()
     frames = [data[k:k + 64] for k in range(0, len(data) - 63, 64)]
-    fbs = []
+    fbs, infos = [], []
     for k, f in enumerate(frames):
         try:
-            fbs.append(decode_feedback(f))
+            d = decode_feedback(f)
         except (ValueError, IndexError) as e:
             fails.append(f"feedback frame {k} does not decode: {e}")
+            continue
+        if d["info_version"]:
+            infos.append((k, d))
+        else:
+            fbs.append(d)
+    # The identity answers the first command (which asked for it) in the very next slot: frame 0
+    # is the one written after the first transaction. It takes that slot's sequence number.
+    if [k for k, _ in infos] != [0]:
+        fails.append(f"identity frames at slots {[k for k, _ in infos]}, expected exactly slot 0")
+    else:
+        info = infos[0][1]
+        want = {"info_version": 1, "fw_version": 0x000100, "board": 0, "info_seq": 1}
+        for k, v in want.items():
+            if info[k] != v:
+                fails.append(f"identity {k} = {info[k]}, expected {v}")
+        if git_hash and info["git_hash"] != int(git_hash[:8], 16):
+            fails.append(f"identity git hash {info['git_hash']:08x}, expected {git_hash[:8]}")
+        if not 20200101 <= info["build_date"] <= 29991231:
+            fails.append(f"identity build date {info['build_date']}")
+        # QEMU does not model the RCC: no reset flag is set, so the cause is Unknown (0).
+        if info["reset_cause"] != 0 or info["reset_count"] != 0:
+            fails.append(f"reset cause {info['reset_cause']} count {info['reset_count']}, expected 0/0")
+        if fbs and fbs[0]["seq"] != 2:
+            fails.append(f"first feedback after the identity has seq {fbs[0]['seq']}, expected 2")
     if len(fbs) < 40:
         return fails + [f"only {len(fbs)} feedback frames"]
     for a, b in zip(fbs, fbs[1:]):
@@ -90,7 +116,7 @@ def check_feedback(path: str, rows: list) -> list:
     return fails
 
 
-def main(path: str, feedback: str) -> int:
+def main(path: str, feedback: str, git_hash: str) -> int:
     rows = []
     for line in open(path, encoding="utf-8", errors="replace"):
         m = LINE.search(line)
@@ -127,17 +153,18 @@ def main(path: str, feedback: str) -> int:
         modes = [r["mode"] for r in after if r["tick"] < brake_at["tick"]]
         if "Hold" not in modes or "Stop" not in modes:
             fails.append(f"ladder skipped HOLD/STOP on the way down: {modes}")
-    fails += check_feedback(feedback, rows)
+    fails += check_feedback(feedback, rows, git_hash)
     for f in fails:
         print("FAIL:", f)
     if fails:
         return 1
     print(f"qemu: {len(rows)} ticks traced; frames applied; corrupted frame rejected without effect; "
           f"BRAKE at tick {brake_at['tick']}, the 10th tick after the last valid frame; "
-          f"feedback frames decode with µs time stamps 1000 apart and consecutive sequence numbers")
-    print("4 passed, 0 failed")
+          f"feedback frames decode with µs time stamps 1000 apart and consecutive sequence numbers; "
+          f"the identity answers the request in the next slot")
+    print("5 passed, 0 failed")
     return 0
 
 
 if __name__ == "__main__":
-    sys.exit(main(sys.argv[1], sys.argv[2]))
+    sys.exit(main(sys.argv[1], sys.argv[2], sys.argv[3] if len(sys.argv) > 3 else ""))

@@ -38,7 +38,7 @@ def key(field: int, wire_type: int) -> bytes:
     return varint((field << 3) | wire_type)
 
 
-def command(ts: int, left: float, right: float, mode: int, enable: int, seq: int) -> bytes:
+def command(ts: int, left: float, right: float, mode: int, enable: int, seq: int, request: int = 0) -> bytes:
     p = bytearray()
     # Fields with their default value are omitted (proto3).
     if ts:
@@ -54,6 +54,8 @@ def command(ts: int, left: float, right: float, mode: int, enable: int, seq: int
     if seq:
         p += key(7, 5) + struct.pack("<I", seq)
     p += key(8, 0) + varint(VERSION)
+    if request:
+        p += key(9, 0) + varint(request)
     body = bytes([len(p)]) + bytes(p)
     body += bytes(FRAME_LEN - 2 - len(body))
     return body + struct.pack(">H", crc16_ccitt_false(body))
@@ -66,7 +68,9 @@ def main(path: str) -> None:
     seq = 1
     # Arm: a valid frame with enable = 0, then enable = 1 frames ramping up (0.04 rad/s per frame,
     # inside the 0.05 rad/s-per-tick acceleration limit) to left 1.0, right -0.5 rad/s.
-    recs.append(b"\x01" + command(1000, 0.0, 0.0, 1, 0, seq))
+    # The first frame also asks for the MCU's identity (request = 1): the next feedback slot
+    # carries an McuInfo frame instead of a MotorFeedback.
+    recs.append(b"\x01" + command(1000, 0.0, 0.0, 1, 0, seq, request=1))
     for k in range(1, 46):
         seq += 1
         left = min(0.04 * k, 1.0)

@@ -22,6 +22,11 @@
 mod board;
 mod panic;
 
+/// Build identity from `build.rs`: commit, dirty flag, date.
+mod build {
+    include!(concat!(env!("OUT_DIR"), "/identity.rs"));
+}
+
 use defmt_rtt as _;
 
 #[rtic::app(device = stm32f4xx_hal::pac, peripherals = true)]
@@ -78,7 +83,7 @@ mod app {
         tx_buf: [[u8; FRAME_LEN]; 2] = [[0; FRAME_LEN]; 2],
     ])]
     fn init(cx: init::Context) -> (Shared, Local) {
-        let cause = crate::panic::reset_cause(&cx.device.RCC);
+        let boot = crate::panic::boot(&cx.device.RCC);
         let (b, iwdg, dbg) = board::init(cx.device, cx.local.rx_buf, cx.local.tx_buf);
         let Board {
             bridge,
@@ -92,8 +97,10 @@ mod app {
         } = b;
         let iwdg = board::Iwdg::start(iwdg, &dbg);
         defmt::info!(
-            "firmware up after reset ({}): BRAKE latched until the host arms it",
-            cause
+            "firmware up: reset {} (count {=u32}, panic line {=u32}); BRAKE latched until the host arms it",
+            boot.cause,
+            boot.count,
+            boot.panic_line
         );
         (
             Shared {
@@ -112,7 +119,7 @@ mod app {
                 encoders,
                 speed_timer: speed,
                 link_hw: link,
-                link: LinkTask::new(),
+                link: LinkTask::new(board::identity(&boot)),
                 clock: TickClock,
                 tick_timer: tick,
                 tick: TickTask::new(&TUNING),

@@ -1,69 +1,66 @@
 //! What a panic does on the board: the bridges are braked first (from any context, without their
 //! owner), the location is kept in RAM that survives the reset, then the MCU resets. At the next
-//! boot [`reset_cause`] reads the reset flags and that record.
+//! boot [`boot`] reads the reset flags and that record, and counts the resets since power-on.
 
 use core::mem::MaybeUninit;
 use core::panic::PanicInfo;
 use core::ptr::{addr_of, addr_of_mut};
+use protocol::amr::ResetCause;
 
 /// Marks a valid panic record ("PANC").
 const MAGIC: u32 = 0x5041_4E43;
+/// Marks a valid reset counter ("RSTC").
+const COUNT_MAGIC: u32 = 0x5253_5443;
 
-/// The panic record: magic and source line; in `.uninit`, which the reset does not clear.
+/// The record that survives a reset: panic magic, panic line, counter magic, resets since
+/// power-on. In `.uninit`, which start-up does not clear; after a power-on its content is random,
+/// so the magic words and the power-on flag decide what is believed.
 #[allow(unsafe_code)] // a link section: the record must sit in RAM the reset leaves alone
-#[link_section = ".uninit.PANIC"]
-static mut RECORD: MaybeUninit<[u32; 2]> = MaybeUninit::uninit();
+#[link_section = ".uninit.RESET"]
+static mut RECORD: MaybeUninit<[u32; 4]> = MaybeUninit::uninit();
 
-/// Why the MCU last reset, as read at boot.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, defmt::Format)]
-pub enum ResetCause {
-    /// Power-on or brown-out reset.
-    PowerOn,
-    /// The reset pin.
-    Pin,
-    /// The independent watchdog.
-    IndependentWatchdog,
-    /// A panic (the source line).
-    Panic(u32),
-    /// A software reset without a panic record.
-    Software,
-    /// None of the flags was set.
-    Unknown,
+/// Why the MCU last started, as the identity frame reports it.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Boot {
+    /// The reset cause.
+    pub cause: ResetCause,
+    /// Source line of the panic that caused it (0 if none).
+    pub panic_line: u32,
+    /// Resets since power-on.
+    pub count: u32,
 }
 
-/// Reads and clears the reset flags (RCC_CSR) and the panic record.
+/// Reads and clears the reset flags (RCC_CSR) and the panic record, counts the reset.
 #[allow(unsafe_code)]
-pub fn reset_cause(rcc: &stm32f4xx_hal::pac::RCC) -> ResetCause {
+pub fn boot(rcc: &stm32f4xx_hal::pac::RCC) -> Boot {
     let csr = rcc.csr().read().bits();
     // RMVF: clear the flags for the next boot.
     rcc.csr().modify(|_, w| w.rmvf().set_bit());
-    // SAFETY: read and cleared once at boot, before any interrupt is enabled; the panic handler
-    // (the only writer) cannot run concurrently.
-    let rec = unsafe {
-        let r = addr_of!(RECORD).cast::<[u32; 2]>().read_volatile();
-        addr_of_mut!(RECORD)
-            .cast::<[u32; 2]>()
-            .write_volatile([0, 0]);
-        r
+    // SAFETY: read once at boot, before any interrupt is enabled; the panic handler (the only
+    // other writer) cannot run concurrently.
+    let [magic, line, count_magic, count] =
+        unsafe { addr_of!(RECORD).cast::<[u32; 4]>().read_volatile() };
+    let panicked = magic == MAGIC;
+    let cause = mcu::boot::reset_cause(csr, panicked);
+    let count = match cause {
+        ResetCause::PowerOn | ResetCause::Brownout => 0,
+        _ if count_magic == COUNT_MAGIC => count.saturating_add(1),
+        _ => 0,
     };
-    let [magic, line] = rec;
-    const PORRSTF: u32 = 1 << 27;
-    const BORRSTF: u32 = 1 << 25;
-    const PINRSTF: u32 = 1 << 26;
-    const SFTRSTF: u32 = 1 << 28;
-    const IWDGRSTF: u32 = 1 << 29;
-    if csr & (PORRSTF | BORRSTF) != 0 {
-        ResetCause::PowerOn
-    } else if csr & IWDGRSTF != 0 {
-        ResetCause::IndependentWatchdog
-    } else if csr & SFTRSTF != 0 && magic == MAGIC {
-        ResetCause::Panic(line)
-    } else if csr & SFTRSTF != 0 {
-        ResetCause::Software
-    } else if csr & PINRSTF != 0 {
-        ResetCause::Pin
-    } else {
-        ResetCause::Unknown
+    // SAFETY: as above.
+    unsafe {
+        addr_of_mut!(RECORD)
+            .cast::<[u32; 4]>()
+            .write_volatile([0, 0, COUNT_MAGIC, count])
+    };
+    Boot {
+        cause,
+        panic_line: if panicked && cause == ResetCause::Panic {
+            line
+        } else {
+            0
+        },
+        count,
     }
 }
 

@@ -79,6 +79,22 @@ pub const TUNING: Tuning = Tuning {
     ..mcu::tuning::AMR
 };
 
+/// The identity the link answers an identity request with.
+pub fn identity(boot: &crate::panic::Boot) -> protocol::amr::McuInfo {
+    use protocol::amr::{git_hash_from_hex, BoardProfile, McuInfo};
+    McuInfo {
+        fw_version: crate::build::FW_VERSION,
+        git_hash: git_hash_from_hex(crate::build::GIT_HASH),
+        board: BoardProfile::AmrSpi,
+        build_date: crate::build::BUILD_DATE,
+        reset_cause: boot.cause,
+        reset_count: boot.count,
+        panic_line: boot.panic_line,
+        seq: 0,
+        dirty: crate::build::GIT_DIRTY,
+    }
+}
+
 /// Bytes per link transaction.
 pub const FRAME_LEN: usize = protocol::amr::FRAME_LEN;
 
