@@ -98,3 +98,25 @@ fn no_info_frame_exits_non_zero_with_the_reason() {
         "{err}"
     );
 }
+
+/// Bytes the real firmware image wrote under QEMU (`firmware/qemu/run.sh` keeps them in
+/// `target/qemu/feedback.bin`): the first command of that run asked for the identity.
+#[test]
+fn info_from_the_firmware_s_own_capture() {
+    let p = concat!(env!("CARGO_MANIFEST_DIR"), "/tests/data/qemu-amr-feedback.bin");
+    let (code, out, err) = motorlink(&["info", "--capture", p, "--json"]);
+    assert_eq!(code, 0, "{err}");
+    let v: serde_json::Value = serde_json::from_str(&out).unwrap();
+    let id = &v["identities"][0];
+    // The workspace's firmware crate is 0.1.0, built for the seed 000 SPI board; QEMU models no
+    // reset flags, so the cause is unknown and nothing was counted.
+    assert_eq!(id["fw_version"], "0.1.0", "{out}");
+    assert_eq!(id["board"], "amr_spi", "{out}");
+    assert_eq!(id["reset_cause"], "unknown", "{out}");
+    assert_eq!(id["reset_count"], 0, "{out}");
+    assert_eq!(id["seq"], 1, "{out}");
+    assert_ne!(id["git_hash"], "00000000", "{out}");
+    let (code, out, _) = motorlink(&["info", "--capture", p]);
+    assert_eq!(code, 0);
+    assert!(out.contains("45 feedback, 1 McuInfo, none refused"), "{out}");
+}
