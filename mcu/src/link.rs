@@ -12,10 +12,10 @@
 use crate::safety::Safety;
 use crate::Measurements;
 use protocol::amr::{
-    decode_command, encode_feedback, encode_info, McuInfo, MotorFeedback, FRAME_LEN,
+    decode_command, encode_feedback, encode_info, McuInfo, MotorCommand, MotorFeedback, FRAME_LEN,
     REQUEST_IDENTITY,
 };
-use statemachine::Output;
+use statemachine::{Output, RejectReason};
 
 /// The link task's own state: the feedback sequence, the last accepted command's sequence, and
 /// the identity it answers with.
@@ -58,7 +58,18 @@ impl LinkTask {
     /// validation, ladder step). Not inlined, so the budget report can count it as one unit.
     #[inline(never)]
     pub fn receive(&mut self, safety: &mut Safety, frame: &[u8; FRAME_LEN]) -> Output {
-        let decoded = decode_command(frame);
+        self.apply(safety, decode_command(frame))
+    }
+
+    /// What the task does with a decode result: a refusal becomes `Event::Rejected`, a command
+    /// `Event::Frame` (validated by the ladder); an identity request is noted for the next slot.
+    /// The cross-crate proofs prove this function for every result a decoder can return.
+    #[inline(always)]
+    pub fn apply(
+        &mut self,
+        safety: &mut Safety,
+        decoded: Result<MotorCommand, RejectReason>,
+    ) -> Output {
         let seq = decoded.as_ref().map_or(0, |c| c.seq);
         if decoded
             .as_ref()

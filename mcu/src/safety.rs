@@ -23,6 +23,16 @@ impl Safety {
         }
     }
 
+    /// The board's safety core around an existing ladder state: for proofs that start from any
+    /// state satisfying [`Ladder::is_valid`] (an over-approximation of the reachable states).
+    pub const fn from_ladder(ladder: Ladder) -> Self {
+        Self {
+            ladder,
+            ticks: 0,
+            trace: Trace::new(),
+        }
+    }
+
     /// Feeds one event to the ladder and records what changed.
     pub fn step(&mut self, event: Event) -> Output {
         let before = self.ladder;

@@ -1,14 +1,18 @@
-//! Cross-crate safety harnesses: bytes from the SPI link through `protocol` into the `statemachine`
-//! ladder, as the firmware's `spi_dma_done` task feeds them. The invariants are INV-10 to INV-12 of
+//! Cross-crate safety harnesses over the very functions the firmware's tasks call (crate `mcu`):
+//! bytes from the SPI link through `protocol` into the ladder (`LinkTask::receive` / `apply`, the
+//! body of `spi_dma_done`), and a tick through the ladder to the bridge (`TickTask::run` and
+//! `TickOutcome::drive`, the body of `watchdog_tick`). The invariants are INV-10 to INV-13 of
 //! `SAFETY.md`.
 //!
-//! The proof is split where the two crates meet, the `Result<Command, RejectReason>` that
-//! [`protocol::event_from`] turns into a ladder event:
+//! The frame proof is split where the two crates meet, the decode result that
+//! `LinkTask::apply` turns into a ladder event:
 //! - bytes → result: `protocol`'s harnesses (`open` accepts only frames whose CRC matches; every
 //!   burst of up to 16 bits changes the CRC; every decode-loop step is total and makes progress);
 //! - result → ladder: the two harnesses here, from *any* valid ladder state, for *any* refusal and
 //!   any command a decoder can return ([`refusals_never_move_the_drive`],
-//!   [`decoded_commands_reach_the_ladder_as_sent`]), verified by Kani.
+//!   [`decoded_commands_reach_the_ladder_as_sent`]), verified by Kani;
+//! - tick → bridge: [`tick_drives_the_bridge_as_the_ladder_says`], from any valid ladder state,
+//!   any board inputs and any bridge and ESTOP-latch state, verified by Kani.
 //!
 //! The end-to-end bodies (64 bytes → decoder → ladder in one harness) stay as `cargo test` twins:
 //! under Kani the protobuf decoder over a symbolic 64-byte frame does not finish.
@@ -24,14 +28,37 @@
     )
 )]
 
-use protocol::amr::{command_event, encode_command, MotorCommand, FRAME_LEN};
+use mcu::hw::RecordingBridge;
+use mcu::tick::{Runs, TickInputs};
+use mcu::{Bridge, BridgeState, EstopInput, LinkTask, Measurements, Safety, TickTask};
+use protocol::amr::{decode_command, encode_command, MotorCommand, FRAME_LEN};
 use statemachine::harness::{arbitrary, Source};
-use statemachine::{assume, cover, Event, Ladder, RejectReason, Speed};
+use statemachine::{assume, cover, Drive, Estop, Ladder, Mode, RejectReason, Speed};
 
 fn valid_ladder(src: &mut impl Source) -> Option<Ladder> {
     let cfg = arbitrary::config(src)?;
     let l = arbitrary::ladder(src, cfg);
     l.is_valid().then_some(l)
+}
+
+/// The link task as the firmware builds it (the identity it answers with is irrelevant here).
+fn link() -> LinkTask {
+    LinkTask::new(protocol::amr::McuInfo::default())
+}
+
+/// Steps a copy of `l0` through the link task with `decoded`; returns the ladder after it.
+fn through_link(l0: &Ladder, decoded: Result<MotorCommand, RejectReason>) -> Ladder {
+    let mut safety = Safety::from_ladder(*l0);
+    link().apply(&mut safety, decoded);
+    *safety.ladder()
+}
+
+/// Feeds `frame` through the link task's receive path; returns the ladder after it and whether the
+/// frame decoded.
+fn receive(l0: &Ladder, frame: &[u8; FRAME_LEN]) -> (Ladder, bool) {
+    let mut safety = Safety::from_ladder(*l0);
+    link().receive(&mut safety, frame);
+    (*safety.ladder(), decode_command(frame).is_ok())
 }
 
 /// A command whose speeds the default configuration accepts, in speed mode.
@@ -116,18 +143,16 @@ pub fn undecodable_bytes_never_move_the_drive(src: &mut impl Source) {
             }
         }
     }
-    let e = command_event(&frame);
-    let mut l = l0;
-    l.step(e);
-    if let Event::Rejected(_) = e {
+    let (l, decoded) = receive(&l0, &frame);
+    if !decoded {
         assert_only_counted(&l0, &l);
     }
     cover!(
         src,
-        e == Event::Rejected(RejectReason::Crc),
+        l.counters().rejected(RejectReason::Crc) != l0.counters().rejected(RejectReason::Crc),
         "refused by the CRC"
     );
-    cover!(src, matches!(e, Event::Frame(_)), "bytes that form a frame");
+    cover!(src, decoded, "bytes that form a frame");
 }
 
 /// INV-11 (Incident-A): one flipped bit anywhere in a valid command frame never reaches the ladder as a
@@ -139,19 +164,16 @@ pub fn single_bit_flip_never_reaches_the_ladder(src: &mut impl Source) {
     let cmd = plausible_command(src);
     let mut frame = [0u8; FRAME_LEN];
     encode_command(&cmd, &mut frame);
-    let clean_event = command_event(&frame);
+    let clean_frame = frame;
     let bit = src.u16();
     assume!(src, usize::from(bit) < FRAME_LEN * 8);
     if let Some(b) = frame.get_mut(usize::from(bit / 8)) {
         *b ^= 1u8 << (bit % 8);
     }
-    let e = command_event(&frame);
-    assert!(matches!(e, Event::Rejected(_)));
-    let mut l = l0;
-    l.step(e);
+    let (l, decoded) = receive(&l0, &frame);
+    assert!(!decoded, "a single bit flip never decodes");
     assert!(unchanged(&l0, &l));
-    let mut clean = l0;
-    clean.step(clean_event);
+    let (clean, _) = receive(&l0, &clean_frame);
     cover!(
         src,
         clean.last_valid() != l0.last_valid(),
@@ -174,14 +196,12 @@ pub fn valid_frame_delivers_the_sent_command(src: &mut impl Source) {
     let cmd = plausible_command(src);
     let mut frame = [0u8; FRAME_LEN];
     encode_command(&cmd, &mut frame);
-    let e = command_event(&frame);
     assert_eq!(
-        e,
-        Event::Frame(cmd.to_command()),
+        decode_command(&frame),
+        Ok(cmd),
         "a freshly encoded frame decodes to itself"
     );
-    let mut l = l0;
-    l.step(e);
+    let (l, _) = receive(&l0, &frame);
     check_delivered_as_sent(src, &l0, &l, &cmd);
 }
 
@@ -193,9 +213,7 @@ pub fn refusals_never_move_the_drive(src: &mut impl Source) {
     assume!(src, l0.is_some());
     let Some(l0) = l0 else { return };
     let reason = arbitrary::reason(src);
-    let e = protocol::event_from(Err(reason));
-    let mut l = l0;
-    l.step(e);
+    let l = through_link(&l0, Err(reason));
     assert_only_counted(&l0, &l);
     cover!(src, reason == RejectReason::Crc, "refused by the CRC");
     cover!(
@@ -213,10 +231,81 @@ pub fn decoded_commands_reach_the_ladder_as_sent(src: &mut impl Source) {
     assume!(src, l0.is_some());
     let Some(l0) = l0 else { return };
     let cmd = plausible_command(src);
-    let e = protocol::event_from(Ok(cmd.to_command()));
-    let mut l = l0;
-    l.step(e);
+    let l = through_link(&l0, Ok(cmd));
     check_delivered_as_sent(src, &l0, &l, &cmd);
+}
+
+/// INV-13: the tick drives the bridge as the ladder says, from any valid ladder state, any board
+/// inputs and any bridge and ESTOP-latch state: after `TickTask::run` and `TickOutcome::drive`
+/// the bridge runs only if the ladder drives and no ESTOP press is pending; the tick at which the
+/// watchdog age reaches `brake_after` leaves the bridge braked; a braked bridge keeps the holding
+/// brake applied.
+pub fn tick_drives_the_bridge_as_the_ladder_says(src: &mut impl Source) {
+    let l0 = valid_ladder(src);
+    assume!(src, l0.is_some());
+    let Some(l0) = l0 else { return };
+    let brake_after = l0.config().params().brake_after;
+    let mut safety = Safety::from_ladder(l0);
+    let mut tick = TickTask::new(&mcu::tuning::AMR);
+    let mut bridge = RecordingBridge::new(src.u16());
+    if src.bool() {
+        bridge.apply(BridgeState::Run);
+    }
+    bridge.tripped = src.bool();
+    let mut estop = EstopInput::new();
+    if src.bool() {
+        estop.edge(&mut bridge, true);
+    }
+    let inputs = TickInputs {
+        meas: Measurements {
+            speeds: [src.speed(), src.speed()],
+            overcurrent: src.bool(),
+            ..Measurements::default()
+        },
+        driver_fault: src.bool(),
+        thermal_warning: src.bool(),
+        estop: match src.below(3) {
+            0 => None,
+            1 => Some(Estop::Engage),
+            _ => Some(Estop::Release),
+        },
+        runs: Runs {
+            current: src.u32(),
+            speed: src.u32(),
+        },
+    };
+    let pending = estop.press_pending();
+    let o = tick.run(&mut safety, &inputs);
+    o.drive(&mut bridge, &estop);
+    let braked = bridge.state == BridgeState::Brake;
+    assert!(
+        braked == (o.out.drive == Drive::Brake || pending),
+        "the bridge runs exactly when the ladder drives and no ESTOP press is pending"
+    );
+    if safety.ladder().age() >= brake_after {
+        assert!(
+            braked,
+            "the tick at age >= brake_after leaves the bridge braked"
+        );
+    }
+    if braked {
+        assert!(!bridge.tripped, "a braked tick clears the break flag");
+    }
+    assert!(
+        o.brake_release == (o.out.mode != Mode::Brake),
+        "the holding brake is released only while the ladder drives"
+    );
+    cover!(
+        src,
+        l0.mode() != Mode::Brake && safety.ladder().age() >= brake_after,
+        "comm loss brakes at this tick"
+    );
+    cover!(src, !braked, "the bridge runs");
+    cover!(
+        src,
+        pending && o.out.drive != Drive::Brake,
+        "a pending press keeps it braked"
+    );
 }
 
 #[cfg(kani)]
@@ -234,6 +323,12 @@ mod verification {
     #[kani::unwind(13)]
     fn verify_decoded_commands_reach_the_ladder_as_sent() {
         decoded_commands_reach_the_ladder_as_sent(&mut KaniSource);
+    }
+
+    #[kani::proof]
+    #[kani::unwind(13)]
+    fn verify_tick_drives_the_bridge_as_the_ladder_says() {
+        tick_drives_the_bridge_as_the_ladder_says(&mut KaniSource);
     }
 }
 
@@ -254,6 +349,16 @@ mod twins {
             super::decoded_commands_reach_the_ladder_as_sent,
         )
         .assert_covered(2);
+    }
+
+    #[test]
+    fn tick_drives_the_bridge_as_the_ladder_says() {
+        Twin::run(
+            26,
+            200_000,
+            super::tick_drives_the_bridge_as_the_ladder_says,
+        )
+        .assert_covered(3);
     }
 
     #[test]
