@@ -1,1 +1,158 @@
+//! Harnesses for the task bodies, each written once: the same body is a `cargo test` (the twin
+//! driver, biased pseudo-random inputs) and, under `cfg(kani)`, a Kani proof.
+//!
+//! Properties: the current loop never writes compares beyond the timer's auto-reload, never
+//! drives both high sides of a bridge, brakes the bridge in the same run on a trip, and never
+//! writes compares to a braked bridge; the speed loop asks for no current in BRAKE and never more
+//! than the speed controller's limit; an ESTOP press brakes the bridge in its handler; the µs
+//! clock never panics and stays within one tick of the tick count.
 
+use crate::current::CurrentLoop;
+use crate::estop::EstopInput;
+use crate::hw::{Bridge, RecordingBridge};
+use crate::speed::SpeedLoop;
+use crate::timing::micros;
+use crate::tuning::AMR;
+use control::{BridgeState, Q};
+use statemachine::harness::Source;
+use statemachine::{assume, cover};
+
+fn amps(src: &mut impl Source) -> Q {
+    Q::from_bits(src.i32())
+}
+
+/// Current loop: one run from rest with any readings, references, bridge state and break flag.
+pub fn current_loop_safe(src: &mut impl Source) {
+    let mut c = CurrentLoop::new(&AMR, [src.u16(), src.u16()]);
+    let arr = AMR.pwm_arr().unwrap_or(1);
+    let mut b = RecordingBridge::new(arr);
+    let running = src.bool();
+    if running {
+        b.apply(BridgeState::Run);
+    }
+    b.tripped = src.bool();
+    let raw = [src.u16(), src.u16()];
+    let s = c.run(&mut b, raw, [amps(src), amps(src)]);
+    for k in b.compares {
+        assert!(k.a <= arr && k.b <= arr, "compares stay within the auto-reload");
+        assert!(k.a == 0 || k.b == 0, "never both high sides of one bridge");
+    }
+    if s.tripped {
+        assert!(b.state == BridgeState::Brake, "a trip brakes the bridge in the same run");
+    }
+    if b.state == BridgeState::Brake {
+        assert!(
+            b.compares.iter().all(|k| k.a == 0 && k.b == 0),
+            "a braked bridge gets no compares"
+        );
+    }
+    cover!(src, running && s.tripped, "trip while running");
+    cover!(src, b.compares.iter().any(|k| k.a > 0), "forward duty written");
+    cover!(src, b.compares.iter().any(|k| k.b > 0), "reverse duty written");
+}
+
+/// Speed loop: one run from rest with any counters and any setpoint.
+pub fn speed_loop_bounded(src: &mut impl Source) {
+    let mut l = SpeedLoop::new(&AMR, [src.u16(), src.u16()]);
+    let setpoint = if src.bool() {
+        Some([src.speed(), src.speed()])
+    } else {
+        None
+    };
+    let s = l.run([src.u16(), src.u16()], setpoint);
+    let limit = AMR.speed.out_limit;
+    for i in s.refs {
+        assert!(control::within(i, limit), "current reference within the speed loop's limit");
+    }
+    if setpoint.is_none() {
+        assert!(s.refs == [Q::ZERO; 2], "no current asked for in BRAKE");
+    }
+    cover!(src, s.refs.iter().any(|i| *i == limit), "reference saturated");
+}
+
+/// ESTOP: a press brakes the bridge in the handler, whatever its state, and is reported by the
+/// next poll even if released again before it.
+pub fn estop_press_brakes_at_once(src: &mut impl Source) {
+    let mut b = RecordingBridge::new(src.u16());
+    let was_running = src.bool();
+    if was_running {
+        b.apply(BridgeState::Run);
+    }
+    let mut e = EstopInput::new();
+    let pressed = src.bool();
+    e.edge(&mut b, pressed);
+    if pressed {
+        assert!(b.state == BridgeState::Brake, "a press brakes the bridge in its handler");
+        assert!(
+            e.poll(src.bool()) == Some(statemachine::Estop::Engage),
+            "a press is reported even if released before the tick"
+        );
+    }
+    cover!(src, pressed && was_running, "press while running");
+}
+
+/// µs clock: never panics; within one tick of the tick count (modulo the u32 wrap).
+pub fn micros_bounded(src: &mut impl Source) {
+    let ticks = src.u32();
+    let period = src.u32();
+    assume!(src, period > 0);
+    let t = micros(ticks, src.u32(), src.bool(), period, 1000);
+    let base = ticks.wrapping_mul(1000);
+    let off = t.wrapping_sub(base);
+    assert!(off < 2000, "time stamp within one tick after the counted ticks");
+    cover!(src, off >= 1000, "update pending counted");
+}
+
+#[cfg(kani)]
+mod proofs {
+    use statemachine::harness::KaniSource;
+
+    #[kani::proof]
+    #[kani::unwind(17)]
+    fn verify_current_loop_safe() {
+        super::current_loop_safe(&mut KaniSource);
+    }
+
+    #[kani::proof]
+    #[kani::unwind(17)]
+    fn verify_speed_loop_bounded() {
+        super::speed_loop_bounded(&mut KaniSource);
+    }
+
+    #[kani::proof]
+    fn verify_estop_press_brakes_at_once() {
+        super::estop_press_brakes_at_once(&mut KaniSource);
+    }
+
+    #[kani::proof]
+    fn verify_micros_bounded() {
+        super::micros_bounded(&mut KaniSource);
+    }
+}
+
+#[cfg(test)]
+mod twins {
+    use statemachine::harness::Twin;
+
+    const CASES: u32 = 100_000;
+
+    #[test]
+    fn current_loop_safe() {
+        Twin::run(0x3C_01, CASES, super::current_loop_safe).assert_covered(3);
+    }
+
+    #[test]
+    fn speed_loop_bounded() {
+        Twin::run(0x3C_02, CASES, super::speed_loop_bounded).assert_covered(1);
+    }
+
+    #[test]
+    fn estop_press_brakes_at_once() {
+        Twin::run(0x3C_03, CASES, super::estop_press_brakes_at_once).assert_covered(1);
+    }
+
+    #[test]
+    fn micros_bounded() {
+        Twin::run(0x3C_04, CASES, super::micros_bounded).assert_covered(1);
+    }
+}
