@@ -6,11 +6,13 @@
 //! ```
 //!
 //! L is the wheelbase (track width, wheel contact to wheel contact), r the wheel radius. The ratios
-//! 1/r, L/(2r), r/2 and r/L are computed once in [`DiffDrive::new`], so a conversion is multiplies and
-//! adds only (no division on the control path).
+//! 1/r and L/(2r) (in Q16.16) and r/L (in Q12.20, as it is small: 0.2 on a typical base) are
+//! computed once in [`DiffDrive::new`], each rounded to the nearest step from the exact geometry,
+//! so a conversion is multiplies, adds and shifts only (no division on the control path); r/2 is
+//! not a ratio at all but r with one more bit of shift.
 //!
-//! Each conversion sums exact 64-bit products of the Q16.16 bit patterns and rounds once, to the
-//! nearest Q16.16 value, at the end: nothing saturates on the way, and only a result outside the
+//! Each conversion sums exact 64-bit products of the inputs' Q16.16 bit patterns with the ratios'
+//! bit patterns and rounds once, to the nearest Q16.16 value, at the end: nothing saturates on the way, and only a result outside the
 //! Q16.16 range (beyond ±32 767 rad/s or m/s, far past any motor) is clamped to it. The geometry
 //! limits keep every precomputed ratio inside Q16.16 and every sum inside `i64`; the bounds are
 //! spelled out at [`DiffDrive::new`]. The `i64` operations are written saturating so that no
@@ -26,6 +28,10 @@ use statemachine::Speed;
 
 /// A sum of products of Q16.16 values before its rounding: Q32.32, exact.
 pub type Q32 = fixed::types::I32F32;
+
+/// The ratio r/L, with the 20 fraction bits its smallness needs (≤ 1000 for any accepted
+/// geometry, so Q12.20's ±2048 holds it).
+type Q20 = fixed::types::I12F20;
 
 const MIN_RADIUS: Q = Q::lit("0.001");
 const MAX_RADIUS: Q = Q::const_from_int(10);
@@ -59,17 +65,35 @@ pub struct DiffDrive {
     radius: Meters,
     inv_radius: Q,
     half_base_over_radius: Q,
-    half_radius: Q,
-    radius_over_base: Q,
+    radius_over_base: Q20,
 }
 
-/// `Σ aᵢ·bᵢ` of Q16.16 bit patterns (a Q32.32 value) rounded to the nearest Q16.16, ties upward, and
-/// clamped to the Q16.16 range.
-fn round_q(q32_32: i64) -> Q {
-    // Callers keep |q32_32| < 2⁶³ − 2¹⁵ (see `DiffDrive::new`), so the saturating add of the
-    // rounding bias is a guard that never triggers.
-    let bits = q32_32.saturating_add(1 << 15) >> 16;
+/// A sum of products `x` in units of 2^-(16 + SHIFT) rounded to the nearest Q16.16, ties upward,
+/// and clamped to the Q16.16 range: SHIFT = 16 for Q16.16 × Q16.16 (a Q32.32 value), 17 for the
+/// same halved, 20 for Q16.16 × Q12.20.
+fn round_q<const SHIFT: u32>(x: i64) -> Q {
+    // Callers keep |x| < 2⁶³ − 2¹⁹ (see `DiffDrive::new`), so the saturating add of the rounding
+    // bias is a guard that never triggers.
+    let bits = x.saturating_add((1 << SHIFT) >> 1) >> SHIFT;
     Q::from_bits(i32::try_from(bits).unwrap_or(if bits < 0 { i32::MIN } else { i32::MAX }))
+}
+
+/// `n / d` rounded to the nearest integer, ties upward, as `i32`; `None` unless 0 ≤ n < 2⁶¹,
+/// 0 < d < 2⁶¹ and the quotient fits. For the ratios in [`DiffDrive::new`].
+const fn div_round(n: i64, d: i64) -> Option<i32> {
+    const LIMIT: i64 = 1 << 61;
+    if n < 0 || n >= LIMIT || d <= 0 || d >= LIMIT {
+        return None;
+    }
+    // (2n + d) / 2d with both doublings below 2⁶³: nothing saturates.
+    match n
+        .saturating_mul(2)
+        .saturating_add(d)
+        .checked_div(d.saturating_mul(2))
+    {
+        Some(q) if q <= i32::MAX as i64 => Some(q as i32),
+        _ => None,
+    }
 }
 
 /// The exact product of two Q16.16 bit patterns as Q32.32: |a·b| ≤ 2⁶² for any two `i32`, so the
@@ -79,38 +103,41 @@ fn wide(a: Q, b: Q) -> i64 {
 }
 
 impl DiffDrive {
-    /// Checks the geometry and precomputes the ratios. A `const fn`, so a fixed geometry can be a
-    /// constant that is checked at compile time.
+    /// Checks the geometry and precomputes the ratios, each the exact one rounded to the nearest
+    /// step (at most half a step off: 2⁻¹⁷ for 1/r and L/(2r), 2⁻²¹ for r/L). A `const fn`, so a
+    /// fixed geometry can be a constant that is checked at compile time.
     ///
-    /// With 1 mm ≤ r ≤ 10 m and 1 cm ≤ L ≤ 64 m: 1/r ≤ 1000, L/(2r) ≤ 32 000, r/2 ≤ 5 and r/L ≤ 1000
-    /// all fit Q16.16 (< 32 768). The conversions then stay inside `i64`:
-    /// - inverse: |v·(1/r)| < 2³¹·1000·2¹⁶ < 2⁵⁷ and |ω·L/(2r)| < 2³¹·32 000·2¹⁶ < 2⁶², sum < 2⁶³ − 2¹⁵;
-    /// - forward: |ω_L + ω_R| ≤ 2³², times r/2 < 2²⁰ or r/L < 2²⁶ stays below 2⁵⁸.
+    /// With 1 mm ≤ r ≤ 10 m and 1 cm ≤ L ≤ 64 m (r ≥ 66 and L ≥ 655 in Q16.16 steps): 1/r ≤ 1000
+    /// and L/(2r) ≤ 32 000 fit Q16.16 (< 32 768), r/L ≤ 1000 fits Q12.20 (< 2048). The conversions
+    /// then stay inside `i64`:
+    /// - inverse: |v·(1/r)| < 2³¹·2²⁶ = 2⁵⁷ and |ω·L/(2r)| < 2³¹·2³¹ = 2⁶², sum < 2⁶³ − 2¹⁹;
+    /// - forward: |ω_L + ω_R| ≤ 2³², times r < 2²⁰ stays below 2⁵²; |ω_R − ω_L| ≤ 2³², times
+    ///   r/L < 2³⁰ (Q12.20) stays below 2⁶².
     pub const fn new(wheelbase: Meters, wheel_radius: Meters) -> Result<Self, KinematicsError> {
-        let (base, radius) = (wheelbase.to_bits(), wheel_radius.to_bits());
-        if radius < MIN_RADIUS.to_bits() || radius > MAX_RADIUS.to_bits() {
+        let (base, radius) = (wheelbase.to_bits() as i64, wheel_radius.to_bits() as i64);
+        if radius < MIN_RADIUS.to_bits() as i64 || radius > MAX_RADIUS.to_bits() as i64 {
             return Err(KinematicsError::WheelRadius);
         }
-        if base < MIN_BASE.to_bits() || base > MAX_BASE.to_bits() {
+        if base < MIN_BASE.to_bits() as i64 || base > MAX_BASE.to_bits() as i64 {
             return Err(KinematicsError::Wheelbase);
         }
-        // Both divisors are checked non-zero above and every quotient fits Q16.16 (bounds above).
-        let Some(inv_radius) = Q::ONE.checked_div(wheel_radius) else {
+        // In Q16.16 steps: 1/r = 2³²/r, L/(2r) = 2¹⁵·L/r; in Q12.20 steps: r/L = 2²⁰·r/L. The
+        // divisors are checked positive above and every quotient fits (bounds above).
+        let Some(inv_radius) = div_round(1 << 32, radius) else {
             return Err(KinematicsError::WheelRadius);
         };
-        let Some(half_base_over_radius) = Q::from_bits(base >> 1).checked_div(wheel_radius) else {
+        let Some(half_base_over_radius) = div_round(base.saturating_mul(1 << 15), radius) else {
             return Err(KinematicsError::Wheelbase);
         };
-        let Some(radius_over_base) = wheel_radius.checked_div(wheelbase) else {
+        let Some(radius_over_base) = div_round(radius.saturating_mul(1 << 20), base) else {
             return Err(KinematicsError::Wheelbase);
         };
         Ok(Self {
             wheelbase,
             radius: wheel_radius,
-            inv_radius,
-            half_base_over_radius,
-            half_radius: Q::from_bits(radius >> 1),
-            radius_over_base,
+            inv_radius: Q::from_bits(inv_radius),
+            half_base_over_radius: Q::from_bits(half_base_over_radius),
+            radius_over_base: Q20::from_bits(radius_over_base),
         })
     }
 
@@ -128,7 +155,7 @@ impl DiffDrive {
     /// Q16.16 value and clamped to the Q16.16 range.
     pub fn inverse(&self, t: Twist) -> [Speed; 2] {
         let [l, r] = self.inverse_unrounded(t);
-        [round_q(l.to_bits()), round_q(r.to_bits())]
+        [round_q::<16>(l.to_bits()), round_q::<16>(r.to_bits())]
     }
 
     /// Wheel speeds `[left, right]` (rad/s) for a body twist before [`DiffDrive::inverse`] rounds
@@ -146,18 +173,18 @@ impl DiffDrive {
     }
 
     /// Body twist from wheel speeds (rad/s), each component rounded once to the nearest Q16.16
-    /// value and clamped to the Q16.16 range.
+    /// value and clamped to the Q16.16 range: v = (ω_L + ω_R)·r/2 exactly from r, ω from r/L.
     pub fn forward(&self, left: Speed, right: Speed) -> Twist {
         let (l, r) = (i64::from(left.to_bits()), i64::from(right.to_bits()));
         let v = l
             .saturating_add(r)
-            .saturating_mul(i64::from(self.half_radius.to_bits()));
+            .saturating_mul(i64::from(self.radius.to_bits()));
         let omega = r
             .saturating_sub(l)
             .saturating_mul(i64::from(self.radius_over_base.to_bits()));
         Twist {
-            v: round_q(v),
-            omega: round_q(omega),
+            v: round_q::<17>(v),
+            omega: round_q::<20>(omega),
         }
     }
 }
@@ -283,8 +310,8 @@ mod tests {
                         f(a) * f(k.inv_radius) + f(b) * f(k.half_base_over_radius),
                     );
                     let t = k.forward(a, b);
-                    check(t.v, (f(a) + f(b)) * f(k.half_radius));
-                    check(t.omega, (f(b) - f(a)) * f(k.radius_over_base));
+                    check(t.v, (f(a) + f(b)) * f(k.radius) / 2.0);
+                    check(t.omega, (f(b) - f(a)) * k.radius_over_base.to_num::<f64>());
                 }
             }
         }
@@ -306,7 +333,10 @@ mod tests {
                     let turn = ratio(w) * ratio(k.half_base_over_radius);
                     assert_eq!(i128::from(l.to_bits()), straight - turn);
                     assert_eq!(i128::from(r.to_bits()), straight + turn);
-                    assert_eq!(k.inverse(t), [round_q(l.to_bits()), round_q(r.to_bits())]);
+                    assert_eq!(
+                        k.inverse(t),
+                        [round_q::<16>(l.to_bits()), round_q::<16>(r.to_bits())]
+                    );
                 }
             }
         }
@@ -322,9 +352,46 @@ mod tests {
         assert_eq!(TOO_SMALL, Err(KinematicsError::WheelRadius));
     }
 
+    /// Each ratio is the exact one (from the geometry as held) rounded to the nearest step: the
+    /// error is at most half a step, 2⁻¹⁷ for 1/r and L/(2r), 2⁻²¹ for r/L.
+    #[test]
+    fn ratios_are_the_nearest_steps() {
+        let geometries = [
+            (0.40, 0.08),
+            (0.42, 0.075),
+            (0.3, 0.05),
+            (1.2, 0.2),
+            (64.0, 0.001),
+            (0.01, 10.0),
+            (0.01, 0.001),
+            (64.0, 10.0),
+        ];
+        for (base, radius) in geometries {
+            let k = DiffDrive::new(q(base), q(radius)).unwrap();
+            let (b, r) = (k.wheelbase().to_num::<f64>(), k.radius.to_num::<f64>());
+            let q16 = 1.0 / 65536.0;
+            assert!((k.inv_radius.to_num::<f64>() - 1.0 / r).abs() <= q16 / 2.0);
+            assert!((k.half_base_over_radius.to_num::<f64>() - b / (2.0 * r)).abs() <= q16 / 2.0);
+            let q20 = 1.0 / 1_048_576.0;
+            assert!((k.radius_over_base.to_num::<f64>() - r / b).abs() <= q20 / 2.0);
+        }
+    }
+
+    /// The default simulated robot (L = 0.40 m, r = 0.08 m, held as 26 214 and 5 243 steps: r/2 is
+    /// not a whole step) against the formula by hand: v = 0.08·(12 + 18)/2 = 1.2 m/s,
+    /// ω = 0.08·(18 − 12)/0.40 = 1.2 rad/s; both within the geometry's own rounding (relative
+    /// 2.3e-5 for r, 1.5e-5 for L) plus half an output step.
+    #[test]
+    fn forward_on_an_odd_radius_by_hand() {
+        let k = DiffDrive::new(q(0.40), q(0.08)).unwrap();
+        let t = k.forward(q(12.0), q(18.0));
+        assert!(close(t.v, 1.2, 1.2 * 2.3e-5 + 7.7e-6), "{}", t.v);
+        assert!(close(t.omega, 1.2, 1.2 * 3.8e-5 + 7.7e-6), "{}", t.omega);
+    }
+
     /// One rounding per output: against the exact real-number formula with the precomputed ratios,
     /// the error is at most half a Q16.16 step; against the true geometry it adds the ratios' own
-    /// rounding (≤ 2⁻¹⁷ each) times the input.
+    /// rounding (≤ 2⁻¹⁷ for 1/r and L/(2r), ≤ 2⁻²¹ for r/L, none for r/2) times the input.
     #[test]
     fn rounds_once_to_nearest() {
         let k = DiffDrive::new(q(0.42), q(0.075)).unwrap();
@@ -347,8 +414,9 @@ mod tests {
             assert!((l.to_num::<f64>() - want_l).abs() <= step / 2.0, "{v} {w}");
             assert!((r.to_num::<f64>() - want_r).abs() <= step / 2.0, "{v} {w}");
             let t = k.forward(v, w);
-            let want_v = (v.to_num::<f64>() + w.to_num::<f64>()) * ratio(k.half_radius);
-            let want_w = (w.to_num::<f64>() - v.to_num::<f64>()) * ratio(k.radius_over_base);
+            let want_v = (v.to_num::<f64>() + w.to_num::<f64>()) * ratio(k.radius) / 2.0;
+            let want_w =
+                (w.to_num::<f64>() - v.to_num::<f64>()) * k.radius_over_base.to_num::<f64>();
             assert!((t.v.to_num::<f64>() - want_v).abs() <= step / 2.0);
             assert!((t.omega.to_num::<f64>() - want_w).abs() <= step / 2.0);
         }
