@@ -34,11 +34,17 @@ pub fn current_loop_safe(src: &mut impl Source) {
     let raw = [src.u16(), src.u16()];
     let s = c.run(&mut b, raw, [amps(src), amps(src)]);
     for k in b.compares {
-        assert!(k.a <= arr && k.b <= arr, "compares stay within the auto-reload");
+        assert!(
+            k.a <= arr && k.b <= arr,
+            "compares stay within the auto-reload"
+        );
         assert!(k.a == 0 || k.b == 0, "never both high sides of one bridge");
     }
     if s.tripped {
-        assert!(b.state == BridgeState::Brake, "a trip brakes the bridge in the same run");
+        assert!(
+            b.state == BridgeState::Brake,
+            "a trip brakes the bridge in the same run"
+        );
     }
     if b.state == BridgeState::Brake {
         assert!(
@@ -47,8 +53,16 @@ pub fn current_loop_safe(src: &mut impl Source) {
         );
     }
     cover!(src, running && s.tripped, "trip while running");
-    cover!(src, b.compares.iter().any(|k| k.a > 0), "forward duty written");
-    cover!(src, b.compares.iter().any(|k| k.b > 0), "reverse duty written");
+    cover!(
+        src,
+        b.compares.iter().any(|k| k.a > 0),
+        "forward duty written"
+    );
+    cover!(
+        src,
+        b.compares.iter().any(|k| k.b > 0),
+        "reverse duty written"
+    );
 }
 
 /// Speed loop: one run from rest with any counters and any setpoint.
@@ -62,12 +76,15 @@ pub fn speed_loop_bounded(src: &mut impl Source) {
     let s = l.run([src.u16(), src.u16()], setpoint);
     let limit = AMR.speed.out_limit;
     for i in s.refs {
-        assert!(control::within(i, limit), "current reference within the speed loop's limit");
+        assert!(
+            control::within(i, limit),
+            "current reference within the speed loop's limit"
+        );
     }
     if setpoint.is_none() {
         assert!(s.refs == [Q::ZERO; 2], "no current asked for in BRAKE");
     }
-    cover!(src, s.refs.iter().any(|i| *i == limit), "reference saturated");
+    cover!(src, s.refs.contains(&limit), "reference saturated");
 }
 
 /// ESTOP: a press brakes the bridge in the handler, whatever its state, and is reported by the
@@ -82,7 +99,10 @@ pub fn estop_press_brakes_at_once(src: &mut impl Source) {
     let pressed = src.bool();
     e.edge(&mut b, pressed);
     if pressed {
-        assert!(b.state == BridgeState::Brake, "a press brakes the bridge in its handler");
+        assert!(
+            b.state == BridgeState::Brake,
+            "a press brakes the bridge in its handler"
+        );
         assert!(
             e.poll(src.bool()) == Some(statemachine::Estop::Engage),
             "a press is reported even if released before the tick"
@@ -99,7 +119,10 @@ pub fn micros_bounded(src: &mut impl Source) {
     let t = micros(ticks, src.u32(), src.bool(), period, 1000);
     let base = ticks.wrapping_mul(1000);
     let off = t.wrapping_sub(base);
-    assert!(off < 2000, "time stamp within one tick after the counted ticks");
+    assert!(
+        off < 2000,
+        "time stamp within one tick after the counted ticks"
+    );
     cover!(src, off >= 1000, "update pending counted");
 }
 
