@@ -95,6 +95,19 @@ mod app {
             speed,
             pins,
         } = b;
+        // Zero-current readings with the bridge braked, before the watchdog starts (≤ 100 ms).
+        let offsets = adc.calibrate().offsets(&TUNING);
+        match offsets {
+            Ok(o) => defmt::info!(
+                "current sensors calibrated: zero at {=u16} / {=u16}",
+                o[0],
+                o[1]
+            ),
+            Err(e) => defmt::error!(
+                "current sensor calibration refused ({}): drive stays braked",
+                e
+            ),
+        }
         let iwdg = board::Iwdg::start(iwdg, &dbg);
         defmt::info!(
             "firmware up: reset {} (count {=u32}, panic line {=u32}); BRAKE latched until the host arms it",
@@ -114,7 +127,7 @@ mod app {
             },
             Local {
                 adc,
-                current: CurrentLoop::new(&TUNING, [TUNING.adc_zero; 2]),
+                current: CurrentLoop::calibrated(&TUNING, offsets),
                 speed: SpeedLoop::new(&TUNING, encoders.read()),
                 encoders,
                 speed_timer: speed,

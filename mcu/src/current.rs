@@ -16,13 +16,80 @@ pub struct CurrentSample {
     pub tripped: bool,
 }
 
+/// Readings averaged at boot for the zero-current calibration (3.2 ms at 20 kHz).
+pub const CALIBRATION_SAMPLES: u32 = 64;
+
+/// Why the boot calibration refused a shunt (its reading with no current flowing).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum CalibrationError {
+    /// Fewer readings than [`CALIBRATION_SAMPLES`] arrived (the ADC trigger did not run).
+    TooFewSamples,
+    /// A shunt's mean reading was further from the nominal zero than the tuning allows:
+    /// the amplifier or its reference is faulty. `[left, right]` means.
+    Implausible([u16; 2]),
+}
+
+/// Sums readings taken with the bridge braked, for [`Calibration::offsets`].
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct Calibration {
+    sums: [u32; 2],
+    n: u32,
+}
+
+impl Calibration {
+    /// No reading yet.
+    pub const fn new() -> Self {
+        Self { sums: [0; 2], n: 0 }
+    }
+
+    /// Adds one pair of readings (12-bit; higher bits ignored).
+    pub fn add(&mut self, raw: [u16; 2]) {
+        for (s, r) in self.sums.iter_mut().zip(raw) {
+            *s = s.saturating_add(u32::from(r & 0x0FFF));
+        }
+        self.n = self.n.saturating_add(1);
+    }
+
+    /// Readings so far.
+    pub const fn count(&self) -> u32 {
+        self.n
+    }
+
+    /// The zero-current readings to use, or why not: each mean must lie within the tuning's
+    /// tolerance of the nominal zero ([`Tuning::calibrated_offset`]).
+    pub fn offsets(&self, t: &Tuning) -> Result<[u16; 2], CalibrationError> {
+        if self.n < CALIBRATION_SAMPLES {
+            return Err(CalibrationError::TooFewSamples);
+        }
+        // Rounded mean; n ≥ 1 and a mean of 12-bit readings fits u16.
+        let mean = self.sums.map(|s| {
+            let m = s
+                .saturating_add(self.n / 2)
+                .checked_div(self.n)
+                .unwrap_or(0);
+            u16::try_from(m).unwrap_or(u16::MAX)
+        });
+        let [ml, mr] = mean;
+        match (t.calibrated_offset(ml), t.calibrated_offset(mr)) {
+            (Some(l), Some(r)) => Ok([l, r]),
+            _ => Err(CalibrationError::Implausible(mean)),
+        }
+    }
+}
+
 /// The current loop's own state: both PIs and the shunt scaling.
+///
+/// Built from a failed calibration ([`CurrentLoop::calibrated`] with an error) it trips on every
+/// run: without a believable zero the current cannot be bounded, so the bridge stays braked and
+/// the overcurrent condition keeps BRAKE latched (the feedback reports it as an overcurrent).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct CurrentLoop {
     pis: [CurrentPi; 2],
     offsets: [u16; 2],
     amps_per_count: Q,
     trip: Amps,
+    sensor_failed: bool,
 }
 
 impl CurrentLoop {
@@ -33,6 +100,19 @@ impl CurrentLoop {
             offsets,
             amps_per_count: t.amps_per_count,
             trip: t.trip_amps,
+            sensor_failed: false,
+        }
+    }
+
+    /// Controllers at rest with the offsets of the boot calibration; a refused calibration gives
+    /// a loop that keeps the bridge braked (see the type's docs).
+    pub fn calibrated(t: &Tuning, calibration: Result<[u16; 2], CalibrationError>) -> Self {
+        match calibration {
+            Ok(offsets) => Self::new(t, offsets),
+            Err(_) => Self {
+                sensor_failed: true,
+                ..Self::new(t, [t.adc_zero; 2])
+            },
         }
     }
 
@@ -52,7 +132,7 @@ impl CurrentLoop {
             adc_to_amps(rr, or, self.amps_per_count),
         ];
         let soft = amps.iter().any(|i| overcurrent(*i, self.trip));
-        let tripped = soft || bridge.break_tripped();
+        let tripped = soft || self.sensor_failed || bridge.break_tripped();
         if tripped {
             // Software backstop of the hardware break: PWM off in this very period.
             bridge.apply(BridgeState::Brake);
@@ -76,5 +156,55 @@ impl CurrentLoop {
     /// The duty integrators, for tests and proofs.
     pub fn pis(&self) -> &[CurrentPi; 2] {
         &self.pis
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::hw::RecordingBridge;
+    use crate::tuning::AMR;
+
+    fn calibrate(readings: [u16; 2], n: u32) -> Result<[u16; 2], CalibrationError> {
+        let mut c = Calibration::new();
+        for _ in 0..n {
+            c.add(readings);
+        }
+        c.offsets(&AMR)
+    }
+
+    #[test]
+    fn calibration_by_hand() {
+        assert_eq!(calibrate([2060, 2030], 64), Ok([2060, 2030]));
+        assert_eq!(
+            calibrate([2060, 2030], 63),
+            Err(CalibrationError::TooFewSamples)
+        );
+        // 2200 is 152 counts (1.2 A) off the nominal 2048: beyond the 100-count tolerance.
+        assert_eq!(
+            calibrate([2048, 2200], 64),
+            Err(CalibrationError::Implausible([2048, 2200]))
+        );
+        // A mean, rounded: half the readings 2050, half 2051 → 2050.5 → 2051.
+        let mut c = Calibration::new();
+        for k in 0..64 {
+            c.add([2050 + (k % 2), 2048]);
+        }
+        assert_eq!(c.offsets(&AMR), Ok([2051, 2048]));
+    }
+
+    #[test]
+    fn a_failed_calibration_keeps_the_bridge_braked() {
+        let mut l = CurrentLoop::calibrated(&AMR, Err(CalibrationError::TooFewSamples));
+        let mut b = RecordingBridge::new(4200);
+        b.apply(BridgeState::Run);
+        let s = l.run(&mut b, [2048, 2048], [Q::ZERO; 2]);
+        assert!(s.tripped);
+        assert_eq!(b.state, BridgeState::Brake);
+        // A calibrated offset is what zero current reads as.
+        let mut l = CurrentLoop::calibrated(&AMR, Ok([2100, 2000]));
+        let s = l.run(&mut b, [2100, 2000], [Q::ZERO; 2]);
+        assert_eq!(s.amps, [Q::ZERO; 2]);
+        assert!(!s.tripped);
     }
 }

@@ -45,7 +45,7 @@ pub mod tuning;
 mod verification;
 
 pub use control::{Amps, BridgeCompare, BridgeState};
-pub use current::{CurrentLoop, CurrentSample};
+pub use current::{Calibration, CalibrationError, CurrentLoop, CurrentSample};
 pub use estop::EstopInput;
 pub use hw::Bridge;
 pub use link::LinkTask;

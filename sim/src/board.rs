@@ -91,7 +91,11 @@ impl SimBoard {
     pub fn new(tuning: Tuning, counts: [u16; 2], reset: (ResetCause, u32)) -> Self {
         let safety = Safety::new(tuning.ladder);
         let arr = tuning.pwm_arr().unwrap_or(1);
-        let offsets = [tuning.adc_zero; 2];
+        // Boot calibration as the firmware does it: readings with the bridge braked (no current).
+        let mut cal = mcu::Calibration::new();
+        for _ in 0..mcu::current::CALIBRATION_SAMPLES {
+            cal.add([tuning.adc_zero; 2]);
+        }
         let mut b = Self {
             tuning,
             out: safety.output(),
@@ -105,7 +109,7 @@ impl SimBoard {
             }),
             tick: TickTask::new(&tuning),
             speed: SpeedLoop::new(&tuning, counts),
-            current: CurrentLoop::new(&tuning, offsets),
+            current: CurrentLoop::calibrated(&tuning, cal.offsets(&tuning)),
             estop: EstopInput::new(),
             estop_level: false,
             meas: Measurements::default(),

@@ -81,6 +81,35 @@ impl CurrentSense {
         [l, r]
     }
 
+    /// Boot calibration, with the bridge braked (no current flows): waits for
+    /// [`mcu::current::CALIBRATION_SAMPLES`] conversions of the running TIM1_CC4 trigger (3.2 ms)
+    /// by polling the end-of-conversion flag, interrupts still masked. The wait is bounded: a
+    /// trigger that never fires gives too few samples, which the calibration refuses.
+    #[cfg(not(feature = "qemu"))]
+    pub fn calibrate(&self) -> mcu::Calibration {
+        let mut c = mcu::Calibration::new();
+        // 168 MHz: about 10 cycles per poll, so 2 000 000 polls ≥ 100 ms, far above 3.2 ms.
+        for _ in 0..2_000_000u32 {
+            if c.count() >= mcu::current::CALIBRATION_SAMPLES {
+                break;
+            }
+            if self.adc.sr().read().bits() & (1 << 2) != 0 {
+                c.add(self.read());
+            }
+        }
+        c
+    }
+
+    /// The emulator's ADC converts nothing useful: mid-scale readings (zero current).
+    #[cfg(feature = "qemu")]
+    pub fn calibrate(&self) -> mcu::Calibration {
+        let mut c = mcu::Calibration::new();
+        for _ in 0..mcu::current::CALIBRATION_SAMPLES {
+            c.add(self.read());
+        }
+        c
+    }
+
     /// The emulator's ADC converts nothing useful: report mid-scale (zero current).
     #[cfg(feature = "qemu")]
     pub fn read(&self) -> [u16; 2] {
