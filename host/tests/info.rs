@@ -103,7 +103,10 @@ fn no_info_frame_exits_non_zero_with_the_reason() {
 /// `target/qemu/feedback.bin`): the first command of that run asked for the identity.
 #[test]
 fn info_from_the_firmware_s_own_capture() {
-    let p = concat!(env!("CARGO_MANIFEST_DIR"), "/tests/data/qemu-amr-feedback.bin");
+    let p = concat!(
+        env!("CARGO_MANIFEST_DIR"),
+        "/tests/data/qemu-amr-feedback.bin"
+    );
     let (code, out, err) = motorlink(&["info", "--capture", p, "--json"]);
     assert_eq!(code, 0, "{err}");
     let v: serde_json::Value = serde_json::from_str(&out).unwrap();
@@ -118,5 +121,8 @@ fn info_from_the_firmware_s_own_capture() {
     assert_ne!(id["git_hash"], "00000000", "{out}");
     let (code, out, _) = motorlink(&["info", "--capture", p]);
     assert_eq!(code, 0);
-    assert!(out.contains("45 feedback, 1 McuInfo, none refused"), "{out}");
+    assert!(
+        out.contains("45 feedback, 1 McuInfo, none refused"),
+        "{out}"
+    );
 }
