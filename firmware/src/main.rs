@@ -32,8 +32,8 @@ use defmt_rtt as _;
 #[rtic::app(device = stm32f4xx_hal::pac, peripherals = true)]
 mod app {
     use crate::board::{
-        self, hooks, Board, Bridge, CurrentSense, Encoders, EstopPin, LinkHw, Periodic, TickClock,
-        FRAME_LEN, TUNING,
+        self, hooks, Board, Bridge, CurrentSense, Encoders, EstopPin, LinkHw, NssPin, Periodic,
+        TickClock, FRAME_LEN, TUNING,
     };
     use mcu::tick::TickInputs;
     use mcu::{
@@ -56,9 +56,15 @@ mod app {
         meas: Measurements,
         /// Run counters of the control tasks, checked before each IWDG refresh (ceiling 4).
         runs: Runs,
-        /// Ladder, tick count and trace, shared by the two priority-2 tasks only.
+        /// Ladder, tick count and trace, shared by the priority-2 tasks only.
         #[lock_free]
         safety: Safety,
+        /// The link peripheral, shared by the two priority-2 link tasks only.
+        #[lock_free]
+        link_hw: LinkHw,
+        /// The link task's state, shared by the two priority-2 link tasks only.
+        #[lock_free]
+        link: LinkTask,
     }
 
     #[local]
@@ -68,8 +74,7 @@ mod app {
         encoders: Encoders,
         speed_timer: Periodic<pac::TIM5>,
         speed: SpeedLoop,
-        link_hw: LinkHw,
-        link: LinkTask,
+        nss: NssPin,
         clock: TickClock,
         tick_timer: Periodic<pac::TIM2>,
         tick: TickTask,
@@ -91,6 +96,7 @@ mod app {
             adc,
             link,
             estop,
+            nss,
             tick,
             speed,
             pins,
@@ -124,6 +130,8 @@ mod app {
                 meas: Measurements::default(),
                 runs: Runs::default(),
                 safety: Safety::new(TUNING.ladder),
+                link_hw: link,
+                link: LinkTask::new(board::identity(&boot)),
             },
             Local {
                 adc,
@@ -131,8 +139,7 @@ mod app {
                 speed: SpeedLoop::new(&TUNING, encoders.read()),
                 encoders,
                 speed_timer: speed,
-                link_hw: link,
-                link: LinkTask::new(board::identity(&boot)),
+                nss,
                 clock: TickClock,
                 tick_timer: tick,
                 tick: TickTask::new(&TUNING),
@@ -190,10 +197,11 @@ mod app {
 
     /// Link frame received. Priority 2, once per SPI transaction (1 kHz from the host): DMA1
     /// stream 3 transfer complete.
-    #[task(binds = DMA1_STREAM3, priority = 2, shared = [safety, meas],
-           local = [link_hw, link, clock])]
+    #[task(binds = DMA1_STREAM3, priority = 2, shared = [safety, link_hw, link, meas],
+           local = [clock])]
     fn spi_dma_done(mut cx: spi_dma_done::Context) {
-        let Some(frame) = cx.local.link_hw.take_rx() else {
+        let link_hw = cx.shared.link_hw;
+        let Some(frame) = link_hw.take_rx() else {
             return;
         };
         let safety = cx.shared.safety;
@@ -206,8 +214,19 @@ mod app {
         );
         let m = cx.shared.meas.lock(|m| *m);
         let mut fb = [0u8; FRAME_LEN];
-        cx.local.link.on_frame(safety, &frame, &m, now, &mut fb);
-        cx.local.link_hw.put_tx(&fb);
+        cx.shared.link.on_frame(safety, &frame, &m, now, &mut fb);
+        link_hw.put_tx(&fb);
+    }
+
+    /// Link chip select released. Priority 2 (never preempts `spi_dma_done`, which has the lower
+    /// IRQ number and so runs first when both are pending at the end of a frame): a transaction
+    /// cut short re-arms the link at a frame boundary and counts as a framing refusal.
+    #[task(binds = EXTI15_10, priority = 2, shared = [safety, link_hw, link], local = [nss])]
+    fn spi_nss_rise(cx: spi_nss_rise::Context) {
+        cx.local.nss.clear();
+        if cx.shared.link_hw.resync_if_cut() {
+            cx.shared.link.transaction_cut(cx.shared.safety);
+        }
     }
 
     /// Watchdog tick. Priority 2, 1 kHz: TIM2 update, the ladder's time base.

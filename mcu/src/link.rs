@@ -61,6 +61,13 @@ impl LinkTask {
         self.apply(safety, decode_command(frame))
     }
 
+    /// A transaction cut short at the link's chip select (the board re-armed its receiver at a
+    /// frame boundary): the lost frame is a framing refusal, like any frame that did not arrive
+    /// whole, through the same path as every decode result ([`LinkTask::apply`]).
+    pub fn transaction_cut(&mut self, safety: &mut Safety) -> Output {
+        self.apply(safety, Err(RejectReason::Framing))
+    }
+
     /// What the task does with a decode result: a refusal becomes `Event::Rejected`, a command
     /// `Event::Frame` (validated by the ladder); an identity request is noted for the next slot.
     /// The cross-crate proofs prove this function for every result a decoder can return.

@@ -350,3 +350,19 @@ fn an_identity_request_is_answered_in_the_next_slot_and_only_there() {
     assert!(decode_feedback(&b.tx).is_ok());
     assert_eq!(b.safety.ladder().counters().valid_frames, 4);
 }
+
+#[test]
+fn a_cut_transaction_is_a_framing_refusal_that_moves_nothing() {
+    let mut b = Board::new();
+    b.drive_at(1.0);
+    let before = *b.safety.ladder();
+    b.link.transaction_cut(&mut b.safety);
+    let after = b.safety.ladder();
+    assert_eq!(
+        after.counters().rejected(statemachine::RejectReason::Framing),
+        before.counters().rejected(statemachine::RejectReason::Framing) + 1
+    );
+    assert_eq!(after.applied(), before.applied());
+    assert_eq!(after.last_valid(), before.last_valid());
+    assert_eq!(after.age(), before.age());
+}

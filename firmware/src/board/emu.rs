@@ -72,6 +72,11 @@ impl EmuLink {
         Some(frame)
     }
 
+    /// The emulated link has no chip select: never cut short.
+    pub fn resync_if_cut(&mut self) -> bool {
+        false
+    }
+
     /// Appends the feedback frame to `feedback.bin`.
     pub fn put_tx(&mut self, frame: &[u8; FRAME_LEN]) {
         if let Some(fd) = self.tx {

@@ -3,7 +3,7 @@
 use super::regs::*;
 use super::FRAME_LEN;
 use stm32f4xx_hal::pac;
-use stm32f4xx_hal::rcc::{Enable, Reset};
+use stm32f4xx_hal::rcc::Enable;
 
 /// SPI2 slave with circular, double-buffered DMA: one [`FRAME_LEN`]-byte transaction per frame.
 ///
@@ -13,18 +13,20 @@ use stm32f4xx_hal::rcc::{Enable, Reset};
 ///  at TC: rx[1 − CT] holds the frame just received; tx[1 − CT] is free for the next feedback
 /// ```
 ///
-/// A byte slip (a glitch on SCK) shifts every following frame; each then fails its CRC, the
-/// ladder brakes on comm loss after 10 ticks, and only a reset resynchronises (fail-safe, not
-/// fail-operational; see proofs/SAFETY.md §7, F7).
+/// A transaction cut short (NSS released early, or a lost SCK edge) would shift every following
+/// frame; the NSS rising edge (EXTI12) checks the receive count and re-arms the link at a frame
+/// boundary ([`SpiLink::resync_if_cut`]), so only the cut frame is lost (counted as a framing
+/// refusal).
 pub struct SpiLink {
     dma: pac::DMA1,
-    _spi: pac::SPI2,
+    spi: pac::SPI2,
     rx: *mut [[u8; FRAME_LEN]; 2],
     tx: *mut [[u8; FRAME_LEN]; 2],
 }
 
-// SAFETY: `SpiLink` is moved once, from `init` into the one task that owns it; the raw pointers
-// address 'static buffers that only that task and the DMA engine touch.
+// SAFETY: `SpiLink` is moved once, from `init` into a resource of the two priority-2 link tasks,
+// which never preempt each other; the raw pointers address 'static buffers that only those tasks
+// and the DMA engine touch.
 unsafe impl Send for SpiLink {}
 
 const DMA_CR_EN: u32 = 1;
@@ -52,19 +54,41 @@ impl SpiLink {
         rcc: &mut pac::RCC,
     ) -> Self {
         pac::SPI2::enable(rcc);
-        pac::SPI2::reset(rcc);
         pac::DMA1::enable(rcc);
+        let l = Self { dma, spi, rx, tx };
+        l.arm();
+        l
+    }
+
+    /// (Re)starts the link from a clean state: SPI2 reset through RCC (no half-shifted byte
+    /// survives), both streams stopped, pointed at the start of buffer 0 with a full frame to go,
+    /// flags cleared, then re-enabled. Called at start-up and after a cut-short transaction.
+    fn arm(&self) {
+        let dma = &self.dma;
+        let (rx_s, tx_s) = (dma.st(3), dma.st(4));
+        for st in [rx_s, tx_s] {
+            rmw(st.cr(), DMA_CR_EN, 0);
+            // EN reads 1 until the stream has finished its current beat (a few bus cycles).
+            for _ in 0..1000u32 {
+                if st.cr().read().bits() & DMA_CR_EN == 0 {
+                    break;
+                }
+            }
+        }
+        // SAFETY: RCC APB1RSTR bit SPI2RST pulses the SPI2 reset; no other bit is touched and
+        // nothing else writes APB1RSTR after init.
+        let rcc = unsafe { &*pac::RCC::ptr() };
+        rmw(rcc.apb1rstr(), 0, 1 << 14);
+        rmw(rcc.apb1rstr(), 1 << 14, 0);
+        let spi = &self.spi;
         let dr = spi.dr().as_ptr() as u32;
-        let rx: *mut [[u8; FRAME_LEN]; 2] = rx;
-        let tx: *mut [[u8; FRAME_LEN]; 2] = tx;
         let addr = |p: *mut [[u8; FRAME_LEN]; 2], i: usize| -> u32 {
             p.cast::<u8>().wrapping_add(i.wrapping_mul(FRAME_LEN)) as u32
         };
         let len = FRAME_LEN as u32;
-        let rx_s = dma.st(3);
         wr(rx_s.par(), dr);
-        wr(rx_s.m0ar(), addr(rx, 0));
-        wr(rx_s.m1ar(), addr(rx, 1));
+        wr(rx_s.m0ar(), addr(self.rx, 0));
+        wr(rx_s.m1ar(), addr(self.rx, 1));
         wr(rx_s.ndtr(), len);
         wr(
             rx_s.cr(),
@@ -75,10 +99,9 @@ impl SpiLink {
                 | DMA_CR_TCIE
                 | DMA_CR_TEIE,
         );
-        let tx_s = dma.st(4);
         wr(tx_s.par(), dr);
-        wr(tx_s.m0ar(), addr(tx, 0));
-        wr(tx_s.m1ar(), addr(tx, 1));
+        wr(tx_s.m0ar(), addr(self.tx, 0));
+        wr(tx_s.m1ar(), addr(self.tx, 1));
         wr(tx_s.ndtr(), len);
         wr(
             tx_s.cr(),
@@ -90,12 +113,25 @@ impl SpiLink {
         rmw(tx_s.cr(), 0, DMA_CR_EN);
         wr16(spi.cr2(), 0b11); // RXDMAEN | TXDMAEN
         wr16(spi.cr1(), 1 << 6); // SPE; slave, CPOL = CPHA = 0, 8 bit, MSB first, hardware NSS
-        Self {
-            dma,
-            _spi: spi,
-            rx,
-            tx,
+    }
+
+    /// Called at the rising edge of NSS (end of a transaction): if the receive stream is not at a
+    /// frame boundary, the transaction was cut short; the link is re-armed so the next
+    /// transaction lands at the start of a buffer instead of shifting every later frame.
+    /// Returns true if it resynchronised.
+    ///
+    /// ```text
+    ///  NSS   ‾‾\____________________/‾‾‾   complete frame: TC ran first (lower IRQ number),
+    ///  NDTR    64 … 1 → reload 64   ↑      NDTR = 64 at the edge: nothing to do
+    ///  NSS   ‾‾\________/‾‾‾               cut short: NDTR = 64 − k at the edge → re-arm
+    /// ```
+    pub fn resync_if_cut(&mut self) -> bool {
+        let left = self.dma.st(3).ndtr().read().bits() & 0xFFFF;
+        if left == FRAME_LEN as u32 {
+            return false;
         }
+        self.arm();
+        true
     }
 
     /// Handles the transfer-complete interrupt: copies out the frame just received and returns it,

@@ -20,7 +20,7 @@
 //! | gate-driver nFAULT               | PD2   | input, pull-up         | low = driver fault → Condition::Undervoltage |
 //! | over-temperature warning nOTW    | PD3   | input, pull-up         | low = warning → Condition::ThermalWarning  |
 //! | ESTOP loop                       | PD4   | input, pull-up, EXTI4  | normally-closed contact to GND: high = pressed or wire cut |
-//! | link from the Jetson: NSS / SCK  | PB12 / PB13 | SPI2, AF5        | slave, mode 0, 8 bit, MSB first            |
+//! | link from the Jetson: NSS / SCK  | PB12 / PB13 | SPI2, AF5; NSS also EXTI12 | slave, mode 0, 8 bit, MSB first; NSS rise resyncs |
 //! | link MISO / MOSI                 | PC2 / PC3   | SPI2, AF5        | DMA1 stream 4 (TX) / stream 3 (RX), ch 0   |
 //! | SWD                              | PA13 / PA14 |                  | probe-rs, defmt over RTT                    |
 //!
@@ -192,6 +192,17 @@ pub fn estop_pressed() -> bool {
     !cfg!(feature = "qemu") && idr & (1 << 4) != 0
 }
 
+/// The link's chip select as an interrupt source (EXTI12, rising edge = end of a transaction).
+pub struct NssPin(stm32f4xx_hal::gpio::PB12<stm32f4xx_hal::gpio::Alternate<5>>);
+
+impl NssPin {
+    /// Clears the EXTI pending bit (first thing in the handler).
+    pub fn clear(&mut self) {
+        use stm32f4xx_hal::gpio::ExtiPin;
+        self.0.clear_interrupt_pending_bit();
+    }
+}
+
 /// The local ESTOP input (EXTI4): a normally-closed contact to ground with a pull-up, so a
 /// pressed button and a cut wire both read high.
 pub struct EstopPin(stm32f4xx_hal::gpio::PD4<stm32f4xx_hal::gpio::Input>);
@@ -221,6 +232,8 @@ pub struct Board {
     pub link: LinkHw,
     /// The local ESTOP input.
     pub estop: EstopPin,
+    /// The link's chip select, for resynchronisation.
+    pub nss: NssPin,
     /// 1 kHz tick timer.
     pub tick: Periodic<pac::TIM2>,
     /// 10 kHz speed-loop timer.
@@ -272,6 +285,11 @@ pub fn init(
     estop.make_interrupt_source(&mut syscfg);
     estop.trigger_on_edge(&mut exti, Edge::RisingFalling);
     estop.enable_interrupt(&mut exti);
+    // NSS stays in its SPI function; the EXTI still sees its level.
+    let mut nss = gpiob.pb12.into_alternate::<5>();
+    nss.make_interrupt_source(&mut syscfg);
+    nss.trigger_on_edge(&mut exti, Edge::Rising);
+    nss.enable_interrupt(&mut exti);
 
     let rcc_regs: &mut pac::RCC = &mut rcc;
     let bridge = Bridge::new(dp.TIM1, dp.TIM8, rcc_regs);
@@ -299,7 +317,6 @@ pub fn init(
         gpiod.pd13.into_alternate::<2>(),
         gpioc.pc0.into_analog(),
         gpioc.pc1.into_analog(),
-        gpiob.pb12.into_alternate::<5>(),
         gpiob.pb13.into_alternate::<5>(),
         gpioc.pc2.into_alternate::<5>(),
         gpioc.pc3.into_alternate::<5>(),
@@ -319,6 +336,7 @@ pub fn init(
             adc,
             link,
             estop: EstopPin(estop),
+            nss: NssPin(nss),
             tick,
             speed,
             pins,
