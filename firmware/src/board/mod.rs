@@ -44,6 +44,8 @@
 #![allow(unsafe_code)]
 
 pub mod bridge;
+#[cfg(not(feature = "qemu"))]
+mod clock;
 #[cfg(feature = "qemu")]
 pub mod emu;
 #[cfg(not(feature = "qemu"))]
@@ -260,6 +262,8 @@ pub fn init(
             .pclk1(42.MHz())
             .pclk2(84.MHz()),
     );
+    #[cfg(not(feature = "qemu"))]
+    clock::enable_css(&rcc);
     #[cfg(feature = "qemu")]
     let mut rcc = {
         let _ = Config::hsi();
