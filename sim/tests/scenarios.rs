@@ -179,3 +179,51 @@ fn estop_needs_the_rearm() {
     assert!((3.5..3.52).contains(&t), "{t}");
     assert!(host.log.iter().all(|(_, d)| d.name() != "arm_refused"));
 }
+
+/// Driving backwards and braking regeneratively makes the motor currents negative: the board
+/// reports them signed, and the host must not take that for a failed current sensor.
+#[test]
+fn reverse_driving_raises_no_sensor_fault_end_to_end() {
+    let sc = Scenario::from_toml(
+        r#"
+name = "reverse"
+duration_s = 4.0
+[[cmd_vel]]
+from_s = 0.2
+to_s = 2.0
+v = -1.0
+w = 0.0
+[[cmd_vel]]
+from_s = 2.0
+to_s = 4.0
+v = 0.0
+w = 0.0
+[expect]
+never_brake = true
+moving_at_end = false
+"#,
+        "test",
+    )
+    .unwrap();
+    let mut host = SimHost::new();
+    let mut trace = Vec::new();
+    let r = sim::run(&sc, &mut host, sim::RunOptions::default(), Some(&mut trace)).unwrap();
+    assert!(r.summary.check(&sc).is_empty(), "{:#?}", r.summary);
+    // The run really drove backwards with negative currents (columns of the per-tick trace).
+    let text = String::from_utf8(trace).unwrap();
+    let mut lines = text.lines();
+    let header: Vec<&str> = lines.next().unwrap().split(',').collect();
+    let col = |name: &str| header.iter().position(|h| *h == name).unwrap();
+    let (v, il) = (col("v_mps"), col("current_l"));
+    let rows: Vec<Vec<f64>> = lines
+        .map(|l| l.split(',').map(|x| x.parse().unwrap_or(f64::NAN)).collect())
+        .collect();
+    assert!(rows.iter().any(|r| r[v] < -0.9), "never reached -0.9 m/s");
+    assert!(rows.iter().any(|r| r[il] < -1.0), "no negative current seen");
+    let sensor_faults: Vec<_> = host
+        .log
+        .iter()
+        .filter(|(_, d)| d.name().contains("current"))
+        .collect();
+    assert!(sensor_faults.is_empty(), "{sensor_faults:?}");
+}
