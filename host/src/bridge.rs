@@ -493,9 +493,11 @@ impl Bridge {
             faults: u16::try_from(fb.fault_flags).unwrap_or(u16::MAX),
         };
         if self.frozen && !repeated && !self.monitor.is_stale(t_recv) {
-            // Timestamps advance again (the MCU restarted): stays Latched until re-armed.
+            // Timestamps advance again (the MCU restarted): stays Latched until re-armed, and asks
+            // the MCU why it restarted (its identity carries the reset cause and count).
             self.frozen = false;
             self.monitor.reset(t_recv);
+            self.identity_requested = true;
         }
         for f in self.monitor.check(t_recv, &sample) {
             if f == FeedbackFault::Stale {
@@ -600,6 +602,80 @@ mod tests {
         assert!((last - 12.5).abs() < 1e-3, "{last}");
         // No frame was refused by the ladder's acceleration check.
         assert_eq!(l.counters().rejected_total(), 0);
+    }
+
+    /// Arms and holds cmd_vel (v, ω) for `cycles` 1 ms cycles against a real ladder; the last
+    /// command's wheel speeds.
+    fn settle(b: &mut Bridge, l: &mut Ladder, from: u64, cycles: u64, v: f64, w: f64) -> [f32; 2] {
+        let mut last = [f32::NAN; 2];
+        for k in from..from + cycles {
+            b.cmd_vel(k * 1000, v, w);
+            let c = exchange(b, l, k * 1000);
+            last = [c.left_speed_cmd, c.right_speed_cmd];
+            assert!(last.iter().all(|x| x.is_finite()), "{last:?} at {k}");
+        }
+        last
+    }
+
+    /// The wheel commands for cmd_vel on the default robot (L = 0.40 m, r = 0.08 m, 18 rad/s),
+    /// from wL = (v − ω·0.2)/0.08, wR = (v + ω·0.2)/0.08 worked by hand. Tolerance: the geometry
+    /// is held to 15 µm (r = 0.0800018 m, L = 0.3999939 m: a scale error of 2.3e-5, 4e-4 rad/s at
+    /// 18 rad/s) and the command is an f32.
+    #[test]
+    fn wheel_speeds_for_cmd_vel_by_hand() {
+        let cases = [
+            // 0.8/0.08 = 10 each.
+            ((0.8, 0.0), [10.0, 10.0]),
+            // (0.5 − 0.2)/0.08 = 3.75, (0.5 + 0.2)/0.08 = 8.75.
+            ((0.5, 1.0), [3.75, 8.75]),
+            // (0.3 + 0.14)/0.08 = 5.5, (0.3 − 0.14)/0.08 = 2.
+            ((0.3, -0.7), [5.5, 2.0]),
+            // (−0.4 − 0.1)/0.08 = −6.25, (−0.4 + 0.1)/0.08 = −3.75.
+            ((-0.4, 0.5), [-6.25, -3.75]),
+            // Spin: ∓0.3/0.08 = ∓3.75.
+            ((0.0, 1.5), [-3.75, 3.75]),
+            // (2 − 0.4)/0.08 = 20, (2 + 0.4)/0.08 = 30: over 18, both scaled by 18/30 = 0.6 to
+            // 12 and 18 (the curvature ω/v = 1 kept).
+            ((2.0, 2.0), [12.0, 18.0]),
+            // (−1 − 1)/0.08 = −25, (−1 + 1)/0.08 = 0: scaled by 18/25 to −18 and 0.
+            ((-1.0, 5.0), [-18.0, 0.0]),
+        ];
+        for ((v, w), want) in cases {
+            let mut b = Bridge::new(BridgeConfig::DEFAULT);
+            let mut l = Ladder::new(Config::DEFAULT);
+            b.arm(0);
+            // 18 rad/s at 0.04 rad/s per cycle: 450 cycles.
+            let got = settle(&mut b, &mut l, 0, 600, v, w);
+            for (g, w_) in got.iter().zip(want) {
+                assert!(
+                    (f64::from(*g) - w_).abs() < 5e-4,
+                    "({v}, {w}): {got:?} vs {want:?}"
+                );
+            }
+            assert!(got.iter().all(|g| g.abs() <= 18.0), "{got:?}");
+            assert_eq!(l.counters().rejected_total(), 0);
+        }
+    }
+
+    /// A cmd_vel with a NaN or an infinity commands zero, reached at the slew rate.
+    #[test]
+    fn non_finite_cmd_vel_commands_zero() {
+        for (v, w) in [
+            (f64::NAN, 0.0),
+            (0.5, f64::NAN),
+            (f64::INFINITY, 1.0),
+            (0.0, f64::NEG_INFINITY),
+        ] {
+            let mut b = Bridge::new(BridgeConfig::DEFAULT);
+            let mut l = Ladder::new(Config::DEFAULT);
+            b.arm(0);
+            let moving = settle(&mut b, &mut l, 0, 300, 0.5, 1.0);
+            assert!(moving[1] > 8.0, "{moving:?}");
+            // 8.75 rad/s down at 0.04 per cycle: 219 cycles.
+            let got = settle(&mut b, &mut l, 300, 300, v, w);
+            assert_eq!(got, [0.0, 0.0], "({v}, {w})");
+            assert_eq!(b.state(), ArmState::Armed);
+        }
     }
 
     #[test]

@@ -23,10 +23,12 @@ impl SimHost {
         Self::with_config(BridgeConfig::DEFAULT)
     }
 
-    /// A host with `cfg`.
+    /// A host with `cfg`; like the real bridge at start-up, it first asks the MCU who it is.
     pub fn with_config(cfg: BridgeConfig) -> Self {
+        let mut bridge = Bridge::new(cfg);
+        bridge.request_identity();
         Self {
-            bridge: Bridge::new(cfg),
+            bridge,
             pending_seq: 0,
             log: Vec::new(),
             undrained: Vec::new(),
@@ -70,9 +72,9 @@ impl sim::HostModel for SimHost {
     }
 
     fn end_cycle(&mut self, t_send_us: u64, t_recv_us: u64, rx: &[u8; FRAME_LEN]) {
-        let fb = amr::decode_feedback(rx);
+        let frame = amr::decode_mcu_frame(rx);
         self.bridge
-            .on_feedback(t_send_us, t_recv_us, self.pending_seq, fb);
+            .on_frame(t_send_us, t_recv_us, self.pending_seq, frame);
         self.collect();
     }
 

@@ -127,7 +127,7 @@ fn clock_sync_beats_the_seed_under_drift() {
 
 #[test]
 fn mcu_freeze_is_detected_by_the_host_and_ends_in_brake() {
-    let (sc, s, _) = run("mcu-freeze");
+    let (sc, s, host) = run("mcu-freeze");
     let t = first_report(&s, "mcu_frozen");
     // 5 ms stale limit after the last advancing feedback, within a couple of cycles.
     assert!((2.004..=2.008).contains(&t), "{t}");
@@ -135,6 +135,12 @@ fn mcu_freeze_is_detected_by_the_host_and_ends_in_brake() {
     // freeze (at most one tick earlier): the MCU resets and restarts in BRAKE (POWER_ON).
     let b = s.brake_ms.unwrap();
     assert!((18.95..=20.05).contains(&b), "{b}");
+    // When feedback resumes the host asks the restarted MCU why: the IWDG, the first reset.
+    let r = first_report(&s, "mcu_reset");
+    assert!(r > 2.0 + b / 1e3 && r < 2.05, "{r}");
+    let info = host.bridge.mcu_info().unwrap();
+    assert_eq!(info.reset_cause, protocol::amr::ResetCause::IndependentWatchdog);
+    assert_eq!(info.reset_count, 1);
     let d = s.stop_distance_m.unwrap();
     assert!(
         d <= brake_bound(&sc, s.speed_at_onset.unwrap(), 0.021),
