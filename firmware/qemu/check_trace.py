@@ -4,7 +4,8 @@ import re
 import sys
 
 LINE = re.compile(
-    r"tick=(\d+) mode=(\w+) age=(\d+) drive=(\w+) left=(\S+) right=(\S+) valid=(\d+) rejected=(\d+)"
+    r"tick=(\d+) mode=(\w+) age=(\d+) drive=(\w+) left=(\S+) right=(\S+) valid=(\d+) rejected=(\d+) "
+    r"faults=0x([0-9a-fA-F]+)"
 )
 
 
@@ -58,7 +59,7 @@ def varint(b: bytes, i: int):
             return v, i
 
 
-def check_feedback(path: str, rows: list, git_hash: str) -> list:
+def check_feedback(path: str, rows: list, git_hash: str, tags: list) -> list:
     fails = []
     data = open(path, "rb").read()
     frames = [data[k:k + 64] for k in range(0, len(data) - 63, 64)]
@@ -104,25 +105,42 @@ def check_feedback(path: str, rows: list, git_hash: str) -> list:
             break
     if any(f["version"] != 1 for f in fbs):
         fails.append("feedback without protocol_version 1")
-    # The feedback written in a tick reports the mode the trace printed at the previous tick.
+    # Each feedback frame is written by the link task the tick pends, right after that tick's trace
+    # line, and reports the ladder after the frame it answers. Transactions happen only at ticks
+    # whose frames.bin record has tag 1, so slot j belongs to the j-th such tick. A frame changes
+    # the rung or the flags only when the ladder refuses or accepts it (a refused frame can degrade
+    # the link, an accepted one can arm), so the two agree except at most at the one corrupted frame.
     by_tick = {r["tick"]: r for r in rows}
-    brake_seen = any(MODES[f["mode"]] == "Brake" and f["fault_flags"] & 0x0200 for f in fbs)
-    run_seen = any(MODES[f["mode"]] in ("Normal", "Reduced") for f in fbs)
-    if not (brake_seen and run_seen):
-        fails.append("feedback never reported both a driving mode and BRAKE latched")
-    modes_traced = {r["mode"] for r in by_tick.values()}
-    if not {MODES[f["mode"]] for f in fbs} <= modes_traced:
-        fails.append("feedback reported a mode the trace never showed")
+    slots = [k + 1 for k, tag in enumerate(tags) if tag == 1]
+    frames_fb = [None] + fbs  # slot 0 is the identity
+    compared, mismatched = 0, []
+    for slot, tick in enumerate(slots):
+        if slot == 0 or slot >= len(frames_fb) or tick not in by_tick:
+            continue
+        fb, row = frames_fb[slot], by_tick[tick]
+        compared += 1
+        if MODES[fb["mode"]] != row["mode"] or fb["fault_flags"] != row["faults"]:
+            mismatched.append((tick, MODES[fb["mode"]], row["mode"], hex(fb["fault_flags"]), hex(row["faults"])))
+    if compared < 40:
+        fails.append(f"only {compared} feedback frames matched to trace lines")
+    if len(mismatched) > 1:
+        fails.append(f"feedback mode/flags differ from the trace at {len(mismatched)} ticks: {mismatched[:5]}")
+    if not any(MODES[f["mode"]] == "Brake" and f["fault_flags"] & 0x0200 for f in fbs):
+        fails.append("feedback never reported BRAKE latched")
+    if not any(MODES[f["mode"]] in ("Normal", "Reduced") for f in fbs):
+        fails.append("feedback never reported a driving mode")
     return fails
 
 
-def main(path: str, feedback: str, git_hash: str) -> int:
+def main(path: str, feedback: str, frames: str, git_hash: str) -> int:
+    raw = open(frames, "rb").read()
+    tags = [raw[k] for k in range(0, len(raw), 65)]
     rows = []
     for line in open(path, encoding="utf-8", errors="replace"):
         m = LINE.search(line)
         if m:
-            t, mode, age, drive, left, right, valid, rej = m.groups()
-            rows.append(dict(tick=int(t), mode=mode, age=int(age), drive=drive,
+            t, mode, age, drive, left, right, valid, rej, faults = m.groups()
+            rows.append(dict(tick=int(t), mode=mode, age=int(age), drive=drive, faults=int(faults, 16),
                              left=float(left), right=float(right), valid=int(valid), rejected=int(rej)))
     fails = []
     if len(rows) < 30:
@@ -153,7 +171,7 @@ def main(path: str, feedback: str, git_hash: str) -> int:
         modes = [r["mode"] for r in after if r["tick"] < brake_at["tick"]]
         if "Hold" not in modes or "Stop" not in modes:
             fails.append(f"ladder skipped HOLD/STOP on the way down: {modes}")
-    fails += check_feedback(feedback, rows, git_hash)
+    fails += check_feedback(feedback, rows, git_hash, tags)
     for f in fails:
         print("FAIL:", f)
     if fails:
@@ -161,10 +179,10 @@ def main(path: str, feedback: str, git_hash: str) -> int:
     print(f"qemu: {len(rows)} ticks traced; frames applied; corrupted frame rejected without effect; "
           f"BRAKE at tick {brake_at['tick']}, the 10th tick after the last valid frame; "
           f"feedback frames decode with µs time stamps 1000 apart and consecutive sequence numbers; "
-          f"the identity answers the request in the next slot")
+          f"mode and fault flags as traced; the identity answers the request in the next slot")
     print("5 passed, 0 failed")
     return 0
 
 
 if __name__ == "__main__":
-    sys.exit(main(sys.argv[1], sys.argv[2], sys.argv[3] if len(sys.argv) > 3 else ""))
+    sys.exit(main(sys.argv[1], sys.argv[2], sys.argv[3], sys.argv[4] if len(sys.argv) > 4 else ""))

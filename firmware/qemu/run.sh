@@ -17,6 +17,6 @@ python3 firmware/qemu/make_frames.py "$work/frames.bin"
   -monitor none -serial none -semihosting-config enable=on,target=native -kernel "$elf") > "$work/trace.txt"
 cp "$work/trace.txt" target/qemu/trace.txt
 cp "$work/feedback.bin" target/qemu/feedback.bin
-python3 firmware/qemu/check_trace.py "$work/trace.txt" "$work/feedback.bin" "$(git rev-parse HEAD 2>/dev/null || true)"
+python3 firmware/qemu/check_trace.py "$work/trace.txt" "$work/feedback.bin" "$work/frames.bin" "$(git rev-parse HEAD 2>/dev/null || true)"
 # The host tool decodes the identity and reset cause from the bytes the firmware wrote.
 cargo run -q --release -p motorlink -- info --capture "$work/feedback.bin"
