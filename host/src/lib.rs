@@ -18,6 +18,6 @@ pub mod transport;
 
 pub use bridge::{ArmState, Bridge, BridgeConfig, Diagnostic};
 pub use clocksync::{ClockSync, ClockSyncConfig};
-pub use kinematics::DiffDrive;
+pub use kinematics::{DiffDrive, DiffDriveConfig, GeometryError};
 pub use simhost::SimHost;
 pub use transport::{ByteStream, LinkError, Transport};
