@@ -335,6 +335,15 @@ impl Scenario {
         if !(self.host.nav2_rate_hz > 0.0 && self.host.nav2_rate_hz <= 1000.0) {
             return bad("host.nav2_rate_hz must be in (0, 1000]");
         }
+        match self.plant.kinematics() {
+            Ok(_) => {}
+            Err(control::KinematicsError::WheelRadius) => {
+                return bad("plant.wheel_radius_m must be in [0.001, 10]")
+            }
+            Err(control::KinematicsError::Wheelbase) => {
+                return bad("plant.wheelbase_m must be in [0.01, 64]")
+            }
+        }
         for f in &self.faults {
             if let Fault::Corruption { rate, .. } = f {
                 if !(0.0..=1.0).contains(rate) {
@@ -430,4 +439,34 @@ pub fn builtin() -> Result<Vec<Scenario>, ScenarioError> {
         .iter()
         .map(|(name, text)| Scenario::from_toml(text, &format!("built-in {name}")))
         .collect()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A plant geometry `control::DiffDrive` refuses is refused when the scenario is read, so
+    /// `Plant::new` never sees it.
+    #[test]
+    fn out_of_range_plant_geometry_is_refused_on_load() {
+        let with = |plant: &str| {
+            Scenario::from_toml(
+                &format!("name = \"g\"\nduration_s = 1.0\n[plant]\n{plant}\n"),
+                "test",
+            )
+        };
+        assert!(with("wheel_radius_m = 0.08").is_ok());
+        for (plant, field) in [
+            ("wheel_radius_m = 0.0", "wheel_radius_m"),
+            ("wheel_radius_m = 11.0", "wheel_radius_m"),
+            ("wheelbase_m = 0.001", "wheelbase_m"),
+            ("wheelbase_m = 1e9", "wheelbase_m"),
+        ] {
+            let r = with(plant);
+            assert!(
+                matches!(&r, Err(ScenarioError::Invalid(_, m)) if m.contains(field)),
+                "{plant}: {r:?}"
+            );
+        }
+    }
 }
