@@ -359,8 +359,13 @@ fn a_cut_transaction_is_a_framing_refusal_that_moves_nothing() {
     b.link.transaction_cut(&mut b.safety);
     let after = b.safety.ladder();
     assert_eq!(
-        after.counters().rejected(statemachine::RejectReason::Framing),
-        before.counters().rejected(statemachine::RejectReason::Framing) + 1
+        after
+            .counters()
+            .rejected(statemachine::RejectReason::Framing),
+        before
+            .counters()
+            .rejected(statemachine::RejectReason::Framing)
+            + 1
     );
     assert_eq!(after.applied(), before.applied());
     assert_eq!(after.last_valid(), before.last_valid());

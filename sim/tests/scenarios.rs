@@ -139,7 +139,10 @@ fn mcu_freeze_is_detected_by_the_host_and_ends_in_brake() {
     let r = first_report(&s, "mcu_reset");
     assert!(r > 2.0 + b / 1e3 && r < 2.05, "{r}");
     let info = host.bridge.mcu_info().unwrap();
-    assert_eq!(info.reset_cause, protocol::amr::ResetCause::IndependentWatchdog);
+    assert_eq!(
+        info.reset_cause,
+        protocol::amr::ResetCause::IndependentWatchdog
+    );
     assert_eq!(info.reset_count, 1);
     let d = s.stop_distance_m.unwrap();
     assert!(
@@ -222,10 +225,17 @@ moving_at_end = false
     let col = |name: &str| header.iter().position(|h| *h == name).unwrap();
     let (v, il) = (col("v_mps"), col("current_l"));
     let rows: Vec<Vec<f64>> = lines
-        .map(|l| l.split(',').map(|x| x.parse().unwrap_or(f64::NAN)).collect())
+        .map(|l| {
+            l.split(',')
+                .map(|x| x.parse().unwrap_or(f64::NAN))
+                .collect()
+        })
         .collect();
     assert!(rows.iter().any(|r| r[v] < -0.9), "never reached -0.9 m/s");
-    assert!(rows.iter().any(|r| r[il] < -1.0), "no negative current seen");
+    assert!(
+        rows.iter().any(|r| r[il] < -1.0),
+        "no negative current seen"
+    );
     let sensor_faults: Vec<_> = host
         .log
         .iter()
