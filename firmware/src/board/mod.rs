@@ -244,7 +244,9 @@ pub struct Board {
     pub pins: Pins,
 }
 
-/// Brings up clocks, pins and peripherals, bridge braked and gate driver disabled.
+/// Brings up clocks, pins and peripherals with the bridge braked. The gate driver stays disabled
+/// while the pins are configured and is enabled last, once both timers hold their outputs forced
+/// inactive: BRAKE itself (low sides on) needs a powered gate driver.
 pub fn init(
     dp: pac::Peripherals,
     rx: &'static mut [[u8; FRAME_LEN]; 2],
@@ -325,6 +327,8 @@ pub fn init(
         gpioc.pc2.into_alternate::<5>(),
         gpioc.pc3.into_alternate::<5>(),
     );
+    // Every PWM pin now follows a timer that holds it braked: power the gate driver so the
+    // low sides conduct (dynamic brake) until the host arms the drive.
     en_gate.set_high();
 
     let pins = Pins {
