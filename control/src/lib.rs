@@ -67,6 +67,18 @@ pub type MetersPerSecond = fixed::types::I16F16;
 /// Q16.16, the one number format of this crate.
 pub type Q = fixed::types::I16F16;
 
+/// `x` in Q16.16, rounded to the nearest step; beyond the range saturated, NaN as zero. For the
+/// host and the simulator, which hold their numbers as floats (the MCU path has no floats).
+pub fn q_from_f64(x: f64) -> Q {
+    Q::checked_from_num(x).unwrap_or(if x > 0.0 {
+        Q::MAX
+    } else if x < 0.0 {
+        Q::MIN
+    } else {
+        Q::ZERO
+    })
+}
+
 /// Limits `x` to ±`limit`. A negative `limit` counts as zero. Never panics (unlike `Ord::clamp`).
 pub const fn clamp_sym(x: Q, limit: Q) -> Q {
     let lim = if limit.to_bits() < 0 { Q::ZERO } else { limit };

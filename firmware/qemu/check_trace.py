@@ -3,6 +3,8 @@
 import re
 import sys
 
+from make_frames import crc16_ccitt_false  # the same wire description, written once
+
 LINE = re.compile(
     r"tick=(\d+) mode=(\w+) age=(\d+) drive=(\w+) left=(\S+) right=(\S+) valid=(\d+) rejected=(\d+) "
     r"faults=0x([0-9a-fA-F]+)"
@@ -10,16 +12,6 @@ LINE = re.compile(
 
 
 MODES = ["Normal", "Reduced", "Hold", "Stop", "Brake"]
-
-
-def crc16_ccitt_false(data: bytes) -> int:
-    crc = 0xFFFF
-    for b in data:
-        crc ^= b << 8
-        for _ in range(8):
-            crc = ((crc << 1) ^ 0x1021) if crc & 0x8000 else (crc << 1)
-            crc &= 0xFFFF
-    return crc
 
 
 def decode_feedback(frame: bytes) -> dict:

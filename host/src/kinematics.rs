@@ -69,17 +69,6 @@ impl core::fmt::Display for GeometryError {
 
 impl std::error::Error for GeometryError {}
 
-/// `x` in Q16.16, rounded to the nearest step; beyond the range saturated, NaN as zero.
-fn to_q(x: f64) -> Q {
-    Q::checked_from_num(x).unwrap_or(if x > 0.0 {
-        Q::MAX
-    } else if x < 0.0 {
-        Q::MIN
-    } else {
-        Q::ZERO
-    })
-}
-
 impl DiffDrive {
     /// The simulated robot: 0.40 m wheelbase, 0.08 m wheels, 18 rad/s (a margin under the MCU's 20).
     pub const DEFAULT: Self = match control::DiffDrive::new(Q::lit("0.40"), Q::lit("0.08")) {
@@ -150,8 +139,8 @@ impl DiffDrive {
             (v, omega)
         };
         let [l, r] = self.geometry.inverse_unrounded(Twist {
-            v: to_q(v),
-            omega: to_q(omega),
+            v: control::q_from_f64(v),
+            omega: control::q_from_f64(omega),
         });
         let (wl, wr): (f64, f64) = (l.to_num(), r.to_num());
         let peak = wl.abs().max(wr.abs());
@@ -170,7 +159,9 @@ impl DiffDrive {
         if !(wl.is_finite() && wr.is_finite()) {
             return (0.0, 0.0);
         }
-        let t = self.geometry.forward(to_q(wl), to_q(wr));
+        let t = self
+            .geometry
+            .forward(control::q_from_f64(wl), control::q_from_f64(wr));
         (t.v.to_num(), t.omega.to_num())
     }
 }

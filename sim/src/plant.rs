@@ -152,17 +152,6 @@ pub struct Plant {
     pub wheel_angle: [f64; 2],
 }
 
-/// `x` in Q16.16, rounded to the nearest step; beyond the range saturated, NaN as zero.
-fn to_q(x: f64) -> Q {
-    Q::checked_from_num(x).unwrap_or(if x > 0.0 {
-        Q::MAX
-    } else if x < 0.0 {
-        Q::MIN
-    } else {
-        Q::ZERO
-    })
-}
-
 impl Plant {
     /// A plant at rest, or why its geometry is refused (see [`PlantParams::kinematics`]). The
     /// wheel radius and wheelbase in `p` are replaced by the values the kinematics hold.
@@ -203,15 +192,17 @@ impl Plant {
     /// Wheel speeds (left, right), rad/s, from the body velocity.
     pub fn wheel_speeds(&self) -> [f64; 2] {
         let [l, r] = self.kinematics.inverse_unrounded(Twist {
-            v: to_q(self.v),
-            omega: to_q(self.w),
+            v: control::q_from_f64(self.v),
+            omega: control::q_from_f64(self.w),
         });
         [l.to_num(), r.to_num()]
     }
 
     /// Sets the body velocity from wheel speeds (used to start a scenario in motion).
     pub fn set_wheel_speeds(&mut self, wl: f64, wr: f64) {
-        let t = self.kinematics.forward(to_q(wl), to_q(wr));
+        let t = self
+            .kinematics
+            .forward(control::q_from_f64(wl), control::q_from_f64(wr));
         self.v = t.v.to_num();
         self.w = t.omega.to_num();
     }
