@@ -6,108 +6,259 @@ instruction, single-steps (`stepi`) until the unit returns, counting the steps (
 for functions; for handlers, up to and including the exception return). It also records the
 deepest stack pointer seen below the entry SP (the handler's own stack use, excluding the
 hardware-stacked exception frame).
+
+Units are the board application's task bodies (`mcu::…`, kept out of line for this count) and the
+RTIC handlers, named by their interrupt symbols. Per call it also records:
+- `own`: instructions inside the unit's symbol itself (the rest ran in functions it called), so
+  report.py can replace a handler's own code by the board build's, which differs from the `qemu`
+  build's;
+- `emulator` (`emulator_own`: of those, inside the symbol): instructions of the emulator's
+  stand-ins (`firmware::board::emu`, semihosting), by the debug info of the code that executed
+  (inlined code included); the board does not run them;
+- `skipped`: calls run through without counting because they only print the emulator's trace
+  (`core::fmt`, semihosting output); their instructions are in no figure;
+- `traced`: instructions spent recording a trace entry (`mcu::trace::Trace::push`), 0 for a call
+  that recorded nothing.
+And for the sampled call with the most instructions:
+- `by_function`: instructions per function, inlined code counted in the inlined function;
+- `inclusive`: per `mcu::` function, every instruction executed while it was active (its own code,
+  code inlined into it, and the functions it called), so a body inlined into its handler, such as
+  `mcu::speed::SpeedLoop::run`, still gets its own figure. Calls are followed by the return
+  address they leave in `lr`.
+
+Symbols are looked up in the ELF's symbol table (`arm-none-eabi-nm`), not by gdb's expression
+scope: stopped inside an RTIC task, `ADC` names the app module's `firmware::app::ADC` type.
 """
 import gdb  # noqa: F401  (provided by gdb)
 import json
 import os
 import re
+import subprocess
 
 OUT = os.environ["BUDGET_JSON"]
 SAMPLES = int(os.environ.get("BUDGET_SAMPLES", "5"))
 
-# name, symbol, kind: "fn" returns to its caller; "isr" returns from the exception.
+# GPIOD input data register and the ESTOP input's bit (PD4, high = pressed).
+GPIOD_IDR = 0x4002_0C10
+ESTOP_BIT = 1 << 4
+# NVIC interrupt set-pending registers; interrupt numbers of the handlers QEMU never triggers.
+NVIC_ISPR = 0xE000_E200
+IRQ_EXTI4 = 10
+# Scratch word for `pend`: the far end of the stack (flip-link puts the stack below the statics,
+# growing down towards the start of RAM; no run comes near it).
+STUB = 0x2000_0000
+
+# name, symbol, kind ("fn" returns to its caller; "isr" returns from the exception), options.
+# The ESTOP press comes last: it latches ESTOP, so every later tick would run braked.
 UNITS = [
-    ("frame: receive (CRC + decode + validate + ladder step)", "mcu::link::LinkTask::receive", "fn"),
-    ("frame: feedback (encode feedback frame)", "mcu::link::LinkTask::feedback", "fn"),
-    ("tick: run (conditions + ladder step)", "mcu::tick::TickTask::run", "fn"),
-    ("current_loop handler (ADC)", "ADC", "isr"),
-    ("speed_pid handler (TIM5)", "TIM5", "isr"),
+    ("frame: receive (CRC + decode + validate + ladder step)", "mcu::link::LinkTask::receive", "fn", {}),
+    ("frame: feedback (encode feedback frame)", "mcu::link::LinkTask::feedback", "fn", {}),
+    ("tick: run (conditions + ladder step)", "mcu::tick::TickTask::run", "fn", {}),
+    ("current_loop handler (ADC)", "ADC", "isr", {}),
+    ("speed_pid handler (TIM5)", "TIM5", "isr", {}),
+    ("watchdog_tick handler (TIM2)", "TIM2", "isr", {}),
+    ("spi_dma_done handler (DMA1_STREAM3)", "DMA1_STREAM3", "isr", {}),
+    # A mode change, latch or re-arm: one trace entry and its defmt log line (in a critical section;
+    # with no host attached, the RTT write does not block). The first ones after the units above
+    # come when the frames stop: four (HOLD, STOP, BRAKE, the latch), so at most three are sampled.
+    ("trace: one record (ring entry + defmt log line)", "mcu::trace::Trace::push", "fn",
+     {"samples": min(SAMPLES, 3)}),
+    # QEMU models no GPIO and no EXTI line: the interrupt is pended through the NVIC, and the pin
+    # reads pressed (the bit is set in the register the handler loaded the input data into).
+    ("estop_input handler (EXTI4), press edge", "EXTI4", "isr",
+     {"pend": IRQ_EXTI4, "force_load": {GPIOD_IDR: ESTOP_BIT}, "samples": 1}),
 ]
+# Calls run through uncounted: the emulator's trace printing (the board prints nothing per tick).
+SKIP = re.compile(r"core::fmt::|cortex_m_semihosting::|fixed::display::|as core::fmt::")
+# Code the board does not run: the emulator's link and hooks, semihosting.
+EMULATOR = ("firmware::board::emu", "cortex_m_semihosting")
+# The trace's entry point: a call that records a mode change, latch or re-arm runs it.
+TRACE_PUSH = "mcu::trace::Trace::push"
+LOAD = re.compile(r"^ldr(?:\.w)?\s+(r\d+|ip|lr),\s*\[(r\d+|ip|lr|sp)(?:,\s*#(-?\d+))?\]")
 
 
 def reg(name):
     return int(gdb.parse_and_eval("$" + name)) & 0xFFFFFFFF
 
 
-def function_at(pc, cache={}):
-    """The innermost function (inlined ones included) whose code holds `pc`, by the debug info."""
+def set_reg(name, value):
+    gdb.execute(f"set var ${name} = {value & 0xFFFFFFFF:#x}", to_string=True)
+
+
+def elf_symbols(elf):
+    """Demangled name → (address, size) of every function symbol (first of duplicates)."""
+    out = subprocess.run(["arm-none-eabi-nm", "-C", "-S", "--defined-only", elf],
+                         check=True, capture_output=True, text=True).stdout
+    syms = {}
+    for line in out.splitlines():
+        parts = line.split(maxsplit=3)
+        if len(parts) == 4 and parts[2] in "Tt":
+            name = re.sub(r"::h[0-9a-f]{16}$", "", parts[3])
+            syms.setdefault(name, (int(parts[0], 16) & ~1, int(parts[1], 16)))
+    return syms
+
+
+def chain_at(pc, cache={}):
+    """Functions whose code holds `pc`, innermost first (inlined ones included), by the debug info."""
     if pc not in cache:
-        name = "?"
+        names = []
         try:
             block = gdb.block_for_pc(pc)
-            while block is not None and block.function is None:
+            while block is not None:
+                if block.function is not None:
+                    names.append(block.function.print_name)
                 block = block.superblock
-            if block is not None:
-                name = block.function.print_name
         except RuntimeError:
             pass
-        cache[pc] = name
+        cache[pc] = tuple(names) or ("?",)
     return cache[pc]
 
 
-def count_call(kind, profile=None):
+def pend(irq):
+    """Sets an interrupt pending. gdb cannot: QEMU's debug writes reach RAM and ROM only, not the
+    NVIC. So the core itself executes one `str r1, [r0]` placed in RAM, with the registers it
+    touches restored after it (single steps run with interrupts masked: the interrupt is taken
+    at the next `continue`)."""
+    inf = gdb.selected_inferior()
+    saved = {r: reg(r) for r in ("pc", "r0", "r1")}
+    old = bytes(inf.read_memory(STUB, 2))
+    inf.write_memory(STUB, b"\x01\x60")  # str r1, [r0]
+    set_reg("r0", NVIC_ISPR + 4 * (irq // 32))
+    set_reg("r1", 1 << (irq % 32))
+    set_reg("pc", STUB)
+    gdb.execute("stepi", to_string=True)
+    for r, v in saved.items():
+        set_reg(r, v)
+    inf.write_memory(STUB, old)
+
+
+def run_through(ret):
+    """Runs a call to its return address `ret` without counting (interrupts may run meanwhile)."""
+    bp = gdb.Breakpoint("*" + hex(ret), internal=True, temporary=True)
+    gdb.execute("continue", to_string=True)
+    if bp.is_valid():
+        bp.delete()
+
+
+def count_call(kind, unit_range, skip_entries, force_load, stats):
     ipsr0 = reg("xpsr") & 0x1FF
     sp0 = reg("sp")
     lr0 = reg("lr") & ~1
-    n = 0
+    n = own = emulator = emulator_own = skipped = traced = 0
     min_sp = sp0
     executed = reg("pc")  # the instruction the next step executes
+    arch = gdb.selected_frame().architecture()
+    # Calls in progress: (return address, SP at the call, functions active at the call site).
+    calls = []
+    pcs, inclusive = {}, {}
     # QEMU's gdb stub single-steps with interrupts masked, so nothing preempts the unit: a
     # function ends when it returns to its caller, a handler when the core leaves its exception.
     while n < 50000:
+        forced = None
+        if force_load:
+            m = LOAD.match(arch.disassemble(executed)[0]["asm"])
+            if m and m.group(2) != "sp":
+                address = (reg(m.group(2)) + int(m.group(3) or 0)) & 0xFFFFFFFF
+                if address in force_load:
+                    forced = (m.group(1), force_load[address])
         gdb.execute("stepi", to_string=True)
+        if forced is not None:
+            set_reg(forced[0], reg(forced[0]) | forced[1])
         ipsr = reg("xpsr") & 0x1FF
         if kind == "isr" and ipsr != ipsr0:
             break
         n += 1
-        if profile is not None:
-            profile[executed] = profile.get(executed, 0) + 1
+        chain = chain_at(executed)
+        active = set(chain).union(*(c[2] for c in calls))
+        for f in active:
+            if f.startswith("mcu::"):
+                inclusive[f] = inclusive.get(f, 0) + 1
+        traced += TRACE_PUSH in active
+        pcs[executed] = pcs.get(executed, 0) + 1
+        mine = unit_range[0] <= executed < unit_range[1]
+        own += mine
+        if any(f.startswith(EMULATOR) for f in chain):
+            emulator += 1
+            emulator_own += mine
         pc = reg("pc")
-        executed = pc
         sp = reg("sp")
+        # A call (`bl`, `blx`): `lr` holds the address after the instruction, `pc` went elsewhere.
+        ret = reg("lr") & ~1
+        if ret in (executed + 2, executed + 4) and pc != ret:
+            calls.append((ret, sp, set(chain).union(*(c[2] for c in calls))))
+        if pc in skip_entries:
+            run_through(ret)
+            skipped += 1
+            pc = reg("pc")
+            sp = reg("sp")
+        while calls and pc == calls[-1][0] and sp >= calls[-1][1]:
+            calls.pop()
+        executed = pc
         min_sp = min(min_sp, sp)
         if kind == "fn" and pc == lr0 and sp >= sp0:
             break
-    return n, sp0 - min_sp
+    stats["instructions"].append(n)
+    stats["stack_bytes"].append(sp0 - min_sp)
+    stats["own"].append(own)
+    stats["emulator"].append(emulator)
+    stats["emulator_own"].append(emulator_own)
+    stats["skipped"].append(skipped)
+    stats["traced"].append(traced)
+    # The profile of the call with the most instructions (the worst sampled case).
+    if n >= max(stats["instructions"]):
+        stats["pcs"], stats["inclusive"] = pcs, inclusive
 
 
 def main():
     gdb.execute("set pagination off")
     gdb.execute("set confirm off")
+    syms = elf_symbols(gdb.current_progspace().filename)
+    skip_entries = {a for name, (a, _) in syms.items() if SKIP.search(name)}
     gdb.execute("target remote :" + os.environ.get("GDB_PORT", "3333"))
     results = {}
-    # BUDGET_ONLY=on_frame counts only the units whose symbol contains that text (for quick looks).
+    # BUDGET_ONLY=receive counts only the units whose symbol contains that text (for quick looks).
     only = os.environ.get("BUDGET_ONLY", "")
-    for title, sym, kind in UNITS:
+    for title, sym, kind, opts in UNITS:
         if only not in sym:
             continue
         # At the unit's first instruction (`*address`), not after the prologue where gdb puts a
         # breakpoint on a name: the prologue may already use `lr` as a scratch register, and the
         # return address is read from `lr` at the stop.
-        info = gdb.execute("info address " + sym, to_string=True)
-        address = int(re.search(r"at (?:address )?(0x[0-9a-fA-F]+)", info).group(1), 16) & ~1
+        address, size = syms[sym]
         bp = gdb.Breakpoint("*" + hex(address), internal=True)
-        counts = []
-        stacks = []
-        pcs = {}
-        for _ in range(SAMPLES):
-            gdb.execute("continue", to_string=True)
-            bp.enabled = False
-            n, st = count_call(kind, pcs)
-            bp.enabled = True
-            counts.append(n)
-            stacks.append(st)
+        stats = {"instructions": [], "stack_bytes": [], "own": [], "emulator": [],
+                 "emulator_own": [], "skipped": [], "traced": [], "pcs": {}, "inclusive": {}}
+        samples = opts.get("samples", SAMPLES)
+        try:
+            for _ in range(samples):
+                if "pend" in opts:
+                    pend(opts["pend"])
+                gdb.execute("continue", to_string=True)
+                bp.enabled = False
+                count_call(kind, (address, address + size), skip_entries, opts.get("force_load"), stats)
+                bp.enabled = True
+        except gdb.error as e:
+            # Typically the firmware ended (frames.bin exhausted) before the unit ran often enough:
+            # the units counted so far are kept, report.py lists this one as not measured.
+            results["_failed"] = f"{title}: {e}"
+            break
         bp.delete()
-        # Instructions per function (inlined code counted in the inlined function), per call on average.
+        # Instructions per function in the worst sampled call: `by_function` counts inlined code in
+        # the inlined function (innermost); `inclusive` counts, for each `mcu::` function,
+        # everything executed while it was active (inlined into the code running, or waiting for
+        # a call it made).
         by_fn = {}
-        for pc, k in pcs.items():
-            f = function_at(pc)
+        for pc, k in stats.pop("pcs").items():
+            f = chain_at(pc)[0]
             by_fn[f] = by_fn.get(f, 0) + k
-        profile = {f: round(k / SAMPLES) for f, k in sorted(by_fn.items(), key=lambda x: -x[1])}
-        results[title] = {"instructions": counts, "stack_bytes": stacks, "by_function": profile}
+        stats["by_function"] = dict(sorted(by_fn.items(), key=lambda x: -x[1]))
+        stats["inclusive"] = dict(sorted(stats["inclusive"].items(), key=lambda x: -x[1]))
+        stats["symbol"] = sym
+        results[title] = stats
     with open(OUT, "w") as f:
         json.dump(results, f, indent=1)
-    gdb.execute("kill")
+    if "_failed" not in results:
+        gdb.execute("kill")
 
 
 main()

@@ -1,8 +1,9 @@
 #!/usr/bin/env bash
-# Regenerates firmware/BUDGET.md: flash/RAM of the board build, executed instructions per frame and
-# per control-loop iteration (Cortex-M4 code under QEMU, counted by gdb single-stepping), measured
-# stack use per unit, the worst-case stack per task from the call graph (stack.sh), and the resulting
-# CPU load at 168 MHz. A report, not a test: it takes several minutes.
+# Regenerates firmware/BUDGET.md: flash/RAM of the board build, executed instructions of the board
+# application's task bodies (`mcu::…`) and of each RTIC handler (Cortex-M4 code of the `qemu` build
+# under QEMU, counted by gdb single-stepping: count.py), measured stack use per unit, the board
+# build's handler code (handlers.py), the worst-case stack per task from the call graph (stack.sh),
+# and the resulting CPU load at 168 MHz. A report, not a test: it takes a few minutes.
 # Needs qemu-system-arm, gdb-multiarch, binutils-arm-none-eabi (Debian packages; iproute2's `ss` if present) and python3.
 set -euo pipefail
 cd "$(dirname "$0")/../.."
@@ -39,6 +40,9 @@ if [ ! -s "$work/counts.json" ]; then
   exit 1
 fi
 arm-none-eabi-size -A "$board" > "$work/size.txt"
+python3 firmware/budget/handlers.py board="$board" qemu="$emu" > "$work/handlers.json"
 bash firmware/budget/stack.sh > "$work/stack.md"
-python3 firmware/budget/report.py "$work/size.txt" "$work/counts.json" "$work/stack.md" > firmware/BUDGET.md
+python3 firmware/budget/report.py "$work/size.txt" "$work/counts.json" "$work/stack.md" \
+  "$work/handlers.json" > "$work/BUDGET.md"
+mv "$work/BUDGET.md" firmware/BUDGET.md
 echo "wrote firmware/BUDGET.md"

@@ -19,14 +19,20 @@ import tempfile
 import os
 
 ROOTS = [
-    # (vector / symbol, task, priority); thread mode first.
+    # (vector / symbol, task, priority); thread mode first. Priorities are RTIC's (higher preempts
+    # lower); the fault handlers' negative numbers only order them above every task.
     ("main", "init + idle (thread mode)", 0),
     ("TIM2", "watchdog_tick", 2),
     ("DMA1_STREAM3", "spi_dma_done", 2),
+    ("EXTI15_10", "spi_nss_rise", 2),
     ("TIM5", "speed_pid", 3),
     ("ADC", "current_loop", 4),
+    ("EXTI4", "estop_input", 5),
+    ("NonMaskableInt", "NMI handler (clock security system)", -2),
     ("HardFault", "HardFault handler", -1),
 ]
+# RTIC task priorities (the rest are thread mode and the fault handlers).
+TASK_PRIORITIES = {p for _, _, p in ROOTS if p > 0}
 # Hardware exception frame per preemption: 8 words, 26 with the FPU context (lazy stacking reserves
 # it when the interrupted code used the FPU), plus 4 bytes of alignment padding.
 EXC_FRAME = 26 * 4 + 4
@@ -205,35 +211,61 @@ def main(elf):
         parts = [p for p in "".join(flat).split("::") if p]
         return "::".join(parts[-2:])
 
-    memo, cycles = {}, set()
+    panics = {a for a in fns if pretty(a).startswith("core::panicking::")}
 
-    def worst(addr, path=()):
-        """(bytes, deepest call chain, indirect-call sites met) from `addr` down."""
-        if addr in path:
-            cycles.add(pretty(addr))
-            return 0, [], set()
-        if addr in memo:
-            return memo[addr]
-        best, chain, ind = 0, [], set()
-        for c in callees.get(addr, ()):
-            b, ch, i = worst(c, path + (addr,))
-            ind |= i
-            if b > best:
-                best, chain = b, ch
-        if indirect.get(addr):
-            ind.add(addr)
-        res = (frame.get(addr, 0) + best, [addr] + chain, ind)
-        memo[addr] = res
-        return res
+    class Graph:
+        """Worst-case stack from each function down, optionally without the panic paths (calls
+        into `core::panicking`)."""
+
+        def __init__(self, cut=frozenset()):
+            self.cut, self.memo, self.cycles = cut, {}, set()
+
+        def worst(self, addr, path=()):
+            """(bytes, deepest call chain, indirect-call sites met) from `addr` down."""
+            if addr in path:
+                self.cycles.add(pretty(addr))
+                return 0, [], set()
+            if addr in self.memo:
+                return self.memo[addr]
+            best, chain, ind = 0, [], set()
+            for c in callees.get(addr, ()):
+                if c in self.cut:
+                    continue
+                b, ch, i = self.worst(c, path + (addr,))
+                ind |= i
+                if b > best:
+                    best, chain = b, ch
+            if indirect.get(addr):
+                ind.add(addr)
+            res = (frame.get(addr, 0) + best, [addr] + chain, ind)
+            self.memo[addr] = res
+            return res
+
+        def reach(self, root):
+            seen, todo = set(), [root]
+            while todo:
+                a = todo.pop()
+                if a not in seen and a not in self.cut:
+                    seen.add(a)
+                    todo.extend(callees.get(a, ()))
+            return seen
+
+    full, safe = Graph(), Graph(frozenset(panics))
+
+    def chain_text(chain):
+        return " → ".join(
+            f"`{brief(a)}` {frame[a]}" + ("*" if source[a] == "prologue" else "") for a in chain)
 
     out = ["## Worst-case stack per task\n"]
     out.append("Computed by `firmware/budget/stack.sh` from the board build (the pinned compiler, `cargo fw`'s")
     out.append("profile, plus `-Z emit-stack-sizes` allowed by `RUSTC_BOOTSTRAP=1`): per-function frame sizes")
     out.append("from the `.stack_sizes` section (or, marked *prologue*, read from the function's prologue), call")
     out.append("graph from the disassembly (direct calls and tail calls; a tail call counted as nested, an")
-    out.append("over-estimate).\n")
-    out.append("| task | priority | worst-case bytes | deepest chain (bytes per frame) | indirect calls met |")
-    out.append("|---|---|---|---|---|")
+    out.append("over-estimate). *Without panics* leaves out every call into `core::panicking` (a panic resets")
+    out.append("the MCU; see below); *with panics* follows them once around the panic handler.\n")
+    out.append("| task | priority | worst-case bytes without panics | deepest chain (bytes per frame) | "
+               "with panics | indirect calls met |")
+    out.append("|---|---|---|---|---|---|")
     per_level = {}
     rows_ind = set()
     missing = []
@@ -242,23 +274,25 @@ def main(elf):
         if addr is None:
             missing.append(sym)
             continue
-        total, chain, ind = worst(addr)
-        rows_ind |= ind
+        total, chain, ind = safe.worst(addr)
+        total_p, chain_p, ind_p = full.worst(addr)
+        rows_ind |= ind_p
         per_level[prio] = max(per_level.get(prio, 0), total)
-        chain_s = " → ".join(
-            f"`{brief(a)}` {frame[a]}" + ("*" if source[a] == "prologue" else "") for a in chain)
-        out.append(f"| {task} (`{sym}`) | {prio} | **{total}** | {chain_s} | {len(ind) or 'none'} |")
+        with_p = "same" if total_p == total else f"{total_p}: {chain_text(chain_p)}"
+        out.append(f"| {task} (`{sym}`) | {prio} | **{total}** | {chain_text(chain)} | {with_p} | "
+                   f"{len(ind_p) or 'none'} |")
     out.append("")
     out.append("\\* frame read from the prologue (no `.stack_sizes` entry).")
     levels = sorted(per_level)
     nested = sum(per_level[p] for p in levels) + EXC_FRAME * (len(levels) - 1)
     out.append("")
-    out.append(f"All priority levels nested (thread mode + the worst task of each of the {len(levels) - 1} "
-               f"exception levels, each preemption adding a {EXC_FRAME}-byte exception frame with FPU "
-               f"context and alignment): **{nested} bytes**. Priority-2 tasks do not preempt each other.")
+    out.append(f"All priority levels nested, without panics (thread mode + the worst task of each of the "
+               f"{len(levels) - 1} exception levels, each preemption adding a {EXC_FRAME}-byte exception "
+               f"frame with FPU context and alignment): **{nested} bytes**. Tasks of one priority do not "
+               f"preempt each other.")
     out.append("")
-    if cycles:
-        out.append("Recursion found (no bound computed through it): " + ", ".join(f"`{c}`" for c in sorted(cycles)))
+    if full.cycles:
+        out.append("Recursion found (no bound computed through it): " + ", ".join(f"`{c}`" for c in sorted(full.cycles)))
     else:
         out.append("Recursion: none in the call graph.")
     if rows_ind:
@@ -271,49 +305,67 @@ def main(elf):
                            f"(movw/movt): {targets} (included above)")
             else:
                 out.append(f"- `{pretty(a)}`: targets not followed, bounded by hand")
-    def reach(root):
-        seen, todo = set(), [root]
-        while todo:
-            a = todo.pop()
-            if a not in seen:
-                seen.add(a)
-                todo.extend(callees.get(a, ()))
-        return seen
 
-    panics = {a for a in fns if pretty(a).startswith("core::panicking::")}
-    cycle_addrs = {a for a in fns if pretty(a) in cycles}
+    def unresolved(r):
+        return any(indirect.get(a) and a not in resolved for a in r)
+
     out.append("")
-    out.append("| root | reaches a panic | reaches a cycle | reaches an unresolved indirect call |")
-    out.append("|---|---|---|---|")
+    out.append("| root | reaches a panic | reaches a cycle | reaches an unresolved indirect call | "
+               "same without panics: cycle / unresolved call |")
+    out.append("|---|---|---|---|---|")
+    cycle_addrs = {a for a in fns if pretty(a) in full.cycles}
+    safe_cycles = {a for a in fns if pretty(a) in safe.cycles}
     clean_tasks = True
+    panicking_tasks = []
     for sym, task, prio in ROOTS:
         if sym not in by_name:
             continue
-        r = reach(by_name[sym])
-        flags = [bool(r & panics), bool(r & cycle_addrs),
-                 any(indirect.get(a) and a not in resolved for a in r)]
-        if prio in (2, 3, 4) and any(flags):
-            clean_tasks = False
-        out.append(f"| `{sym}` | " + " | ".join("yes" if f else "no" for f in flags) + " |")
+        r, rs = full.reach(by_name[sym]), safe.reach(by_name[sym])
+        flags = [bool(r & panics), bool(r & cycle_addrs), unresolved(r)]
+        safe_flags = [bool(rs & safe_cycles), unresolved(rs)]
+        if prio in TASK_PRIORITIES:
+            clean_tasks &= not any(safe_flags)
+            if flags[0]:
+                panicking_tasks.append(sym)
+        out.append(f"| `{sym}` | " + " | ".join("yes" if f else "no" for f in flags) + " | "
+                   + " / ".join("yes" if f else "no" for f in safe_flags) + " |")
+    # Where the tasks' paths reach a panic: the callers of `core::panicking` reached from a task.
+    task_reach = set()
+    for sym, _, prio in ROOTS:
+        if prio in TASK_PRIORITIES and sym in by_name:
+            task_reach |= safe.reach(by_name[sym])
+    sites = sorted({brief(a) for a in task_reach if callees.get(a, set()) & panics})
     out.append("")
-    out.append("Bounded by hand (not computed): a cycle is cut where it closes, so each recursion listed")
-    out.append("above adds the frames of one more pass, and the targets of unresolved indirect calls are not")
-    out.append("included. In this build the only cycle is the panic handler re-entered by a panic inside its")
-    out.append("own defmt write (panic-probe's guard stops the second pass before it prints: one more")
-    out.append("`panic_fmt` + `rust_begin_unwind` frame), and the unresolved indirect calls are `core::fmt`")
-    out.append("trait-object calls on the same panic path." if cycles <= {"core::panicking::panic_fmt"}
-               else "CHECK: a cycle other than the panic handler's appeared; bound it by hand.")
+    if full.cycles and not safe.cycles:
+        out.append("Every recursion found passes through the panic handler (none is left without the")
+        out.append("calls into `core::panicking`). The handler brakes the bridges, then logs with")
+        out.append("`defmt::error!`: a panic raised while the defmt logger is held (inside a `defmt` call)")
+        out.append("makes that log panic again (`_defmt_acquire`: logger taken re-entrantly), so the")
+        out.append("handler recurses until the stack runs out (flip-link: a fault at the bottom of RAM,")
+        out.append("then the IWDG reset); the bridges are braked from the first pass. The *with panics*")
+        out.append("figures count one pass and are not bounds.")
+    elif safe.cycles:
+        out.append("CHECK: a recursion outside the panic path: " + ", ".join(f"`{c}`" for c in sorted(safe.cycles))
+                   + "; bound it by hand.")
+    if panicking_tasks:
+        out.append("Tasks that reach a panic: " + ", ".join(f"`{t}`" for t in panicking_tasks)
+                   + "; the calls into `core::panicking` on their paths are in " + ", ".join(f"`{s}`" for s in sites)
+                   + ".")
     if clean_tasks:
-        out.append("Both are reached only from `main` (thread mode: its figure leaves those frames out);")
-        out.append("the four tasks reach no panic, no cycle and no unresolved")
-        out.append("indirect call (table above), so their figures are complete bounds.")
+        out.append(f"Without panics the {len([r for r in ROOTS if r[2] in TASK_PRIORITIES])} tasks reach no cycle "
+                   "and no unresolved indirect call (table above), so those figures are complete bounds.")
     else:
-        out.append("A TASK REACHES ONE OF THEM (table above): its figure is not a complete bound.")
+        out.append("A TASK REACHES A CYCLE OR AN UNRESOLVED INDIRECT CALL WITHOUT PANICS (table above): its "
+                   "figure is not a complete bound.")
     if missing:
         out.append("")
         out.append("Roots not found in the ELF: " + ", ".join(missing))
-    no_entry = sorted(pretty(a) for a in frame if source[a] == "prologue" and any(
-        a in memo.get(by_name.get(s, -1), (0, [], set()))[1] for s, _, _ in ROOTS))
+    on_chains = set()
+    for g in (safe, full):
+        for sym, _, _ in ROOTS:
+            if sym in by_name and by_name[sym] in g.memo:
+                on_chains |= set(g.memo[by_name[sym]][1])
+    no_entry = sorted(pretty(a) for a in on_chains if source.get(a) == "prologue")
     if no_entry:
         out.append("")
         out.append("On a deepest chain without a `.stack_sizes` entry: " + ", ".join(f"`{n}`" for n in no_entry))
