@@ -76,7 +76,8 @@ fn panic(info: &PanicInfo) -> ! {
             .cast::<[u32; 2]>()
             .write_volatile([MAGIC, line])
     };
-    defmt::error!("panic at line {=u32}: bridges braked, resetting", line);
+    // No defmt here: the panic may have interrupted code that holds the logger, and a nested
+    // log would panic again. The line is reported after the reset (identity frame, boot log).
     // Under the emulator a panic ends the run as a failure instead of a reset loop.
     #[cfg(feature = "qemu")]
     cortex_m_semihosting::debug::exit(cortex_m_semihosting::debug::EXIT_FAILURE);

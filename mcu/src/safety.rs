@@ -5,6 +5,27 @@
 use crate::trace::{Record, Trace};
 use statemachine::{Config, Event, FaultFlags, Ladder, Mode, Output};
 
+/// What the trace compares across one ladder step.
+#[derive(Clone, Copy)]
+struct Marks {
+    mode: Mode,
+    rearms: u32,
+    rearm_refused: u32,
+    brake_entries: u32,
+}
+
+impl Marks {
+    fn of(l: &Ladder) -> Self {
+        let c = l.counters();
+        Self {
+            mode: l.mode(),
+            rearms: c.rearms,
+            rearm_refused: c.rearm_refused,
+            brake_entries: c.brake_entries,
+        }
+    }
+}
+
 /// Ladder, tick count and trace.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct Safety {
@@ -35,7 +56,9 @@ impl Safety {
 
     /// Feeds one event to the ladder and records what changed.
     pub fn step(&mut self, event: Event) -> Output {
-        let before = self.ladder;
+        // Only what the trace compares is kept from before the step (not a copy of the ladder:
+        // this runs for every received frame).
+        let before = Marks::of(&self.ladder);
         let out = self.ladder.step(event);
         self.record(&before, &out);
         out
@@ -47,25 +70,25 @@ impl Safety {
         self.step(Event::Tick)
     }
 
-    fn record(&mut self, before: &Ladder, out: &Output) {
+    fn record(&mut self, before: &Marks, out: &Output) {
         let t = self.ticks;
-        let (c0, c1) = (before.counters(), self.ladder.counters());
-        if c1.rearms != c0.rearms {
+        let now = Marks::of(&self.ladder);
+        if now.rearms != before.rearms {
             self.trace.push(t, Record::Rearmed);
         }
-        if c1.rearm_refused != c0.rearm_refused {
+        if now.rearm_refused != before.rearm_refused {
             self.trace.push(t, Record::RearmRefused);
         }
-        if out.mode != before.mode() {
+        if out.mode != before.mode {
             self.trace.push(
                 t,
                 Record::Mode {
-                    from: before.mode(),
+                    from: before.mode,
                     to: out.mode,
                 },
             );
         }
-        if c1.brake_entries != c0.brake_entries {
+        if now.brake_entries != before.brake_entries {
             let causes = out
                 .faults
                 .without(FaultFlags::BRAKE_LATCHED)

@@ -30,7 +30,7 @@ unsafe fn NonMaskableInt() {
     super::bridge::emergency_brake();
     // EN_GATE (PD0) low: the gate driver is off as well.
     super::regs::wr(gpiod.bsrr(), 1 << 16);
-    defmt::error!("HSE clock failure: bridges braked, gate driver off, waiting for the IWDG reset");
+    // No defmt here: the NMI may have interrupted code that holds the logger.
     loop {
         cortex_m::asm::nop();
     }
