@@ -245,7 +245,7 @@ def main(size_path, counts_path, stack_path, handlers_path):
         out.append(f"{RECEIVE}, by stage: {total} = {total - apply_} CRC, protobuf decode and field")
         out.append(f"conversion (`decode_command`, with `receive`'s own entry and exit) + {apply_ - step}")
         out.append(f"`LinkTask::apply` (event, sequence, identity request) + {step - record} `Safety::step`")
-        out.append(f"(the ladder: validation, rung, limits; with the ladder copy for the trace) + {record}")
+        out.append(f"(the ladder: validation, rung, limits; with the marks the trace compares) + {record}")
         out.append("`Safety::record` (trace comparison, nothing recorded).\n")
     for name in (RECEIVE, FEEDBACK, TICK):
         prof = counts.get(name, {}).get("by_function")
