@@ -303,7 +303,7 @@ def main(size_path, counts_path, stack_path, handlers_path):
         n = max(tr["instructions"])
         log = tr.get("inclusive", {}).get("mcu::trace::log", 0)
         notes.append(f"A ladder step that records a trace entry (mode change, BRAKE latch, re-arm or its "
-                     f"refusal, ESTOP press; up to four per step) adds {n} instructions per record "
+                     f"refusal; up to four per step) adds {n} instructions per record "
                      f"({n * CPI / F_CPU * 1e6:.1f} µs), {log} of them in the defmt log line. defmt-rtt "
                      f"writes it inside a critical section (interrupts disabled from `acquire` to `release`), "
                      f"so such a step, in `watchdog_tick`, `spi_dma_done` or `spi_nss_rise`, delays "

@@ -239,7 +239,7 @@ mod app {
             meas: cx.shared.meas.lock(|m| m.take_for_tick()),
             driver_fault: pins.driver_fault(),
             thermal_warning: pins.thermal_warning(),
-            estop: cx.shared.estop.lock(|e| e.poll(estop_level())),
+            estop: cx.shared.estop.lock(|e| e.poll(board::estop_pressed())),
             runs: cx.shared.runs.lock(|r| *r),
         };
         let safety = cx.shared.safety;
@@ -251,11 +251,5 @@ mod app {
             cx.local.iwdg.feed();
         }
         hooks::after_tick(safety.ticks(), &o.out, safety);
-    }
-
-    /// The ESTOP input's level for the tick (the pin is owned by its handler; reading the level
-    /// is a plain GPIO read).
-    fn estop_level() -> bool {
-        board::estop_pressed()
     }
 }

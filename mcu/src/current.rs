@@ -152,11 +152,6 @@ impl CurrentLoop {
         }
         CurrentSample { amps, tripped }
     }
-
-    /// The duty integrators, for tests and proofs.
-    pub fn pis(&self) -> &[CurrentPi; 2] {
-        &self.pis
-    }
 }
 
 #[cfg(test)]

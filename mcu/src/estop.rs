@@ -58,9 +58,4 @@ impl EstopInput {
     pub const fn press_pending(&self) -> bool {
         self.pressed_since_poll
     }
-
-    /// True while the input counts as engaged (as of the last poll).
-    pub const fn engaged(&self) -> bool {
-        self.engaged
-    }
 }

@@ -131,9 +131,4 @@ impl LinkTask {
         .with_output(out);
         encode_feedback(&fb, tx);
     }
-
-    /// The sequence number of the last feedback frame written.
-    pub const fn feedback_seq(&self) -> u32 {
-        self.seq
-    }
 }

@@ -97,11 +97,6 @@ impl Safety {
         }
     }
 
-    /// Records an ESTOP press seen by the input's own handler.
-    pub fn note(&mut self, record: Record) {
-        self.trace.push(self.ticks, record);
-    }
-
     /// The ladder (read only: events go through [`Safety::step`]).
     pub const fn ladder(&self) -> &Ladder {
         &self.ladder

@@ -26,8 +26,6 @@ pub enum Record {
     Rearmed,
     /// A re-arm was refused (a latching cause still active).
     RearmRefused,
-    /// The local ESTOP input was pressed (seen by its own handler, before the ladder).
-    EstopPressed,
 }
 
 /// A record with its time stamp.
@@ -101,7 +99,6 @@ fn log(tick: u32, record: &Record) {
         Record::Latched(c) => defmt::warn!("t={=u32} BRAKE latched, causes {=u16:#x}", tick, c.0),
         Record::Rearmed => defmt::info!("t={=u32} re-armed", tick),
         Record::RearmRefused => defmt::warn!("t={=u32} re-arm refused", tick),
-        Record::EstopPressed => defmt::warn!("t={=u32} ESTOP input pressed", tick),
     }
 }
 

@@ -127,11 +127,6 @@ impl SimBoard {
         b
     }
 
-    /// The tuning.
-    pub fn tuning(&self) -> &Tuning {
-        &self.tuning
-    }
-
     /// The safety core (ladder, tick count, trace).
     pub fn safety(&self) -> &Safety {
         &self.safety
