@@ -294,66 +294,157 @@ impl Source for Twin {
 /// [`Source`], so under Kani they stand for *all* values, and under tests for many biased ones.
 pub mod arbitrary {
     use super::Source;
-    use crate::config::{Config, ConfigParams};
-    use crate::ladder::{Counters, Estop, Event, Ladder};
-    use crate::types::{Command, Condition, ControlMode, FaultFlags, Mode, RejectReason, Speed};
-    use crate::validate::Setpoint;
+    use crate::config::{Config, ConfigParams, BOARD_MAX_BRAKE_AFTER, TRAVEL_CEILING};
+    use crate::ladder::{Counters, Estop, Event, Ladder, Source as Origin};
+    use crate::types::{
+        AxisCommand, AxisMode, Command, Condition, FaultFlags, Mode, ModeSet, RejectReason, Speed,
+    };
+    use crate::validate::{AxisSetpoint, Setpoint};
 
-    /// Any configuration [`Config::new`] accepts; half the time the default (so tests meet it often).
+    /// One of the shipped profiles ([`Config::PROFILES`]).
+    pub fn profile(src: &mut impl Source) -> Config {
+        let i = usize::from(src.below(Config::PROFILES.len() as u8));
+        Config::PROFILES.get(i).copied().unwrap_or(Config::DEFAULT)
+    }
+
+    /// Any configuration [`Config::new`] accepts; half the time a shipped profile (so tests meet them often).
     pub fn config(src: &mut impl Source) -> Option<Config> {
         if src.bool() {
-            return Some(Config::DEFAULT);
+            return Some(profile(src));
         }
-        let v_max = src.speed_within(crate::config::V_MAX_CEILING);
+        // Every value is drawn so that each valid configuration is reachable (under Kani every one
+        // is); ordering and signs are arranged by construction so the tests meet valid ones often.
+        let pos = |src: &mut _, max: Speed| Source::speed_within(src, max).saturating_abs();
+        let v_max = pos(src, crate::config::V_MAX_CEILING);
+        let duty_max = pos(src, Speed::ONE);
+        let gap = |src: &mut _| src_u16_below(src, BOARD_MAX_BRAKE_AFTER.saturating_add(2));
+        let frame_period = gap(src);
+        let hold_after = frame_period.saturating_add(gap(src));
+        let stop_after = hold_after.saturating_add(gap(src));
+        let brake_after = stop_after.saturating_add(gap(src));
+        let (a, b) = (
+            src.speed_within(TRAVEL_CEILING),
+            src.speed_within(TRAVEL_CEILING),
+        );
         let p = ConfigParams {
-            hold_after: u16::from(src.below(12)),
-            stop_after: u16::from(src.below(12)),
-            brake_after: u16::from(src.below(12)),
+            frame_period,
+            hold_after,
+            stop_after,
+            brake_after,
             v_max,
-            reduced_limit: src.speed_within(v_max),
-            max_cmd_step: src.speed_within(v_max),
-            accel_step: src.speed_within(v_max),
-            hold_decel_step: src.speed_within(v_max),
-            stop_decel_step: src.speed_within(v_max),
+            reduced_limit: pos(src, v_max),
+            max_cmd_step: pos(src, v_max),
+            accel_step: pos(src, v_max),
+            hold_decel_step: pos(src, v_max),
+            stop_decel_step: pos(src, v_max),
+            duty_max,
+            duty_reduced: pos(src, duty_max),
+            duty_step: pos(src, duty_max),
+            travel_lo: if a < b { a } else { b },
+            travel_hi: if a < b { b } else { a },
+            modes: ModeSet(src.u8() & ModeSet::ALL.0),
             strike_limit: src.u16(),
             window: src.u16(),
         };
         Config::new(p).ok()
     }
 
-    /// Any control mode the wire can carry (a valid one half the time).
-    pub fn raw_mode(src: &mut impl Source) -> u32 {
-        if src.bool() {
-            u32::from(src.below(4))
-        } else {
-            src.u32()
+    fn src_u16_below(src: &mut impl Source, n: u16) -> u16 {
+        src.u16().checked_rem(n).unwrap_or(0)
+    }
+
+    /// Any drive mode.
+    pub fn axis_mode(src: &mut impl Source) -> AxisMode {
+        let i = usize::from(src.below(AxisMode::ALL.len() as u8));
+        AxisMode::ALL.get(i).copied().unwrap_or(AxisMode::Coast)
+    }
+
+    /// Any drive mode of `set` (non-empty): a drawn mode, or the set's first one if it is not in it.
+    pub fn axis_mode_in(src: &mut impl Source, set: ModeSet) -> AxisMode {
+        let m = axis_mode(src);
+        if set.contains(m) {
+            return m;
+        }
+        AxisMode::ALL
+            .into_iter()
+            .find(|m| set.contains(*m))
+            .unwrap_or(AxisMode::Coast)
+    }
+
+    /// Any value an axis in mode `m` may hold under `p` (the ladder's `applied`).
+    pub fn applied_for(src: &mut impl Source, p: &ConfigParams, m: AxisMode) -> Speed {
+        match m {
+            AxisMode::Coast | AxisMode::Short => Speed::ZERO,
+            AxisMode::Duty => src.speed_within(p.duty_max),
+            AxisMode::Velocity => src.speed_within(p.v_max),
+            AxisMode::Position => src.speed_within(p.v_max).saturating_abs(),
         }
     }
 
-    /// Any command, NaN and out-of-range speeds included.
-    pub fn command(src: &mut impl Source) -> Command {
+    /// Any position within the travel of `p`.
+    pub fn position_in(src: &mut impl Source, p: &ConfigParams) -> Speed {
+        let x = src.speed_within(TRAVEL_CEILING);
+        if x < p.travel_lo {
+            p.travel_lo
+        } else if x > p.travel_hi {
+            p.travel_hi
+        } else {
+            x
+        }
+    }
+
+    /// Any command, NaN and out-of-range numbers, unsupported modes and a zero timeout included.
+    pub fn command<const N: usize>(src: &mut impl Source) -> Command<N> {
+        let mut axes = [AxisCommand::COAST; N];
+        for a in axes.iter_mut() {
+            *a = AxisCommand {
+                mode: axis_mode(src),
+                target: src.f32(),
+                cap: src.f32(),
+            };
+        }
         Command {
-            left: src.f32(),
-            right: src.f32(),
-            mode: raw_mode(src),
+            axes,
             enable: src.bool(),
             seq: if src.bool() { Some(src.u32()) } else { None },
+            timeout: if src.bool() { Some(src.u16()) } else { None },
         }
     }
 
     /// Any setpoint validation could have produced under `cfg`.
-    pub fn setpoint(src: &mut impl Source, cfg: &Config) -> Setpoint {
-        let v = cfg.params().v_max;
-        Setpoint {
-            left: src.speed_within(v),
-            right: src.speed_within(v),
-            mode: if src.bool() {
-                ControlMode::Speed
+    pub fn setpoint<const N: usize>(src: &mut impl Source, cfg: &Config) -> Setpoint<N> {
+        let p = cfg.params();
+        let mut axes = [AxisSetpoint::passive(AxisMode::Coast); N];
+        for a in axes.iter_mut() {
+            let mode = if src.bool() {
+                axis_mode_in(src, p.modes)
             } else {
-                ControlMode::Idle
-            },
+                axis_mode(src)
+            };
+            *a = match mode {
+                AxisMode::Coast | AxisMode::Short => AxisSetpoint::passive(mode),
+                AxisMode::Duty => AxisSetpoint {
+                    mode,
+                    target: src.speed_within(p.duty_max),
+                    cap: Speed::ZERO,
+                },
+                AxisMode::Velocity => AxisSetpoint {
+                    mode,
+                    target: src.speed_within(p.v_max),
+                    cap: Speed::ZERO,
+                },
+                AxisMode::Position => AxisSetpoint {
+                    mode,
+                    target: position_in(src, p),
+                    cap: src.speed_within(p.v_max).saturating_abs(),
+                },
+            };
+        }
+        Setpoint {
+            axes,
             enable: src.bool(),
             seq: if src.bool() { Some(src.u32()) } else { None },
+            brake_after: src_u16_below(src, p.brake_after).saturating_add(1),
         }
     }
 
@@ -375,8 +466,14 @@ pub mod arbitrary {
             .unwrap_or(Condition::Overcurrent)
     }
 
+    /// Any command source.
+    pub fn origin(src: &mut impl Source) -> Origin {
+        let i = usize::from(src.below(Origin::ALL.len() as u8));
+        Origin::ALL.get(i).copied().unwrap_or(Origin::Local)
+    }
+
     /// Any event.
-    pub fn event(src: &mut impl Source) -> Event {
+    pub fn event<const N: usize>(src: &mut impl Source) -> Event<N> {
         match src.below(7) {
             0 => Event::Tick,
             1 => Event::Frame(command(src)),
@@ -385,22 +482,25 @@ pub mod arbitrary {
                 condition: condition(src),
                 active: src.bool(),
             },
-            4 => Event::Estop(if src.bool() {
-                Estop::Engage
-            } else {
-                Estop::Release
-            }),
+            4 => Event::Estop {
+                source: origin(src),
+                action: if src.bool() {
+                    Estop::Engage
+                } else {
+                    Estop::Release
+                },
+            },
             5 => Event::Shutdown(src.bool()),
-            _ => Event::Rearm,
+            _ => Event::Rearm(origin(src)),
         }
     }
 
     /// Any event that is not a valid frame: what the ladder sees while the link is lost
-    /// (refusals, faults, operator actions, and frames that cannot validate).
-    pub fn event_without_valid_frame(src: &mut impl Source) -> Event {
+    /// (refusals, faults, operator actions, and frames that cannot validate: a zero timeout).
+    pub fn event_without_valid_frame<const N: usize>(src: &mut impl Source) -> Event<N> {
         match event(src) {
             Event::Frame(c) => Event::Frame(Command {
-                left: f32::NAN,
+                timeout: Some(0),
                 ..c
             }),
             e => e,
@@ -419,8 +519,8 @@ pub mod arbitrary {
     }
 
     /// Any ladder state under `cfg`; callers `assume!` [`Ladder::is_valid`]. Fields the invariant pins to
-    /// each other (brake latch and mode) are drawn together so the tests waste fewer cases.
-    pub fn ladder(src: &mut impl Source, cfg: Config) -> Ladder {
+    /// each other (brake latch and mode, ESTOP owners and flag) are drawn together so the tests waste fewer cases.
+    pub fn ladder<const N: usize>(src: &mut impl Source, cfg: Config) -> Ladder<N> {
         let p = *cfg.params();
         let mode = mode(src);
         let brake_latched = mode == Mode::Brake;
@@ -428,24 +528,58 @@ pub mod arbitrary {
         for r in rejected.iter_mut() {
             *r = src.u32();
         }
+        let mut applied = [Speed::ZERO; N];
+        let mut axis_modes = [AxisMode::Coast; N];
+        let mut held = [p.travel_lo; N];
+        for ((a, m), h) in applied
+            .iter_mut()
+            .zip(axis_modes.iter_mut())
+            .zip(held.iter_mut())
+        {
+            *m = if src.bool() {
+                axis_mode_in(src, p.modes)
+            } else {
+                axis_mode(src)
+            };
+            if !brake_latched {
+                *a = applied_for(src, &p, *m);
+            }
+            *h = position_in(src, &p);
+        }
+        let estop_owners = src.u8() & src.u8() & 0b111;
+        // Sparse bits for the tests; still every value under Kani (x & y & z covers all of u16).
+        let mut active = FaultFlags(src.u16() & src.u16() & src.u16());
+        active = if estop_owners != 0 {
+            active.union(FaultFlags::ESTOP)
+        } else {
+            active.without(FaultFlags::ESTOP)
+        };
+        let brake_after = if src.bool() {
+            p.brake_after
+        } else {
+            src_u16_below(src, p.brake_after).saturating_add(1)
+        };
         Ladder {
             cfg,
             mode,
-            applied: if brake_latched {
-                [Speed::ZERO; 2]
-            } else {
-                [src.speed_within(p.v_max), src.speed_within(p.v_max)]
-            },
+            applied,
+            axis_modes,
+            held,
             last: if src.bool() {
                 Some(setpoint(src, &cfg))
             } else {
                 None
             },
+            brake_after,
             prev_enable: src.bool(),
-            age: if src.bool() {
-                u16::from(src.below(12))
-            } else {
-                src.u16()
+            // Ages just below each threshold are where the rungs change: drawn often for the tests.
+            age: match src.below(6) {
+                0 => u16::from(src.below(12)),
+                1 => src_u16_below(src, brake_after),
+                2 => p.hold_after.saturating_sub(1),
+                3 => p.stop_after.saturating_sub(1),
+                4 => brake_after.saturating_sub(1),
+                _ => src.u16(),
             },
             brake_latched,
             latch_causes: if brake_latched {
@@ -453,8 +587,12 @@ pub mod arbitrary {
             } else {
                 FaultFlags::NONE
             },
-            // Sparse bits for the tests; still every value under Kani (x & y & z covers all of u16).
-            active: FaultFlags(src.u16() & src.u16() & src.u16()),
+            active,
+            estop_owners,
+            estop_released_by: match src.below(4) {
+                0 => None,
+                _ => Some(origin(src)),
+            },
             rearm_pending: src.bool(),
             degraded: src.bool(),
             clean_ticks: src.u16().checked_rem(p.window).unwrap_or(0),
@@ -469,6 +607,7 @@ pub mod arbitrary {
                 brake_entries: src.u32(),
                 rearms: src.u32(),
                 rearm_refused: src.u32(),
+                estop_release_refused: src.u32(),
             },
         }
     }

@@ -1,52 +1,91 @@
-//! The degradation ladder NORMAL → REDUCED → HOLD → STOP → BRAKE as a pure step function.
+//! The degradation ladder NORMAL → REDUCED → HOLD → STOP → BRAKE as a pure step function over `N` axes.
 //!
 //! ```text
 //!  valid frame ─┐        watchdog tick (1 kHz)
 //!               v              v
 //!          age = 0         age = age + 1 (saturating), then the rung is chosen
 //!
-//!   last valid frame
-//!        │  tick1 tick2 tick3 ..... tick5 ............ tick10
-//!   age: 0    1     2     3           5                  10
-//!        NORMAL/REDUCED   HOLD        STOP               BRAKE (latched)
-//!                          │           │                  │
-//!   setpoint: commanded    └ hold decel ┴ stop decel ─────┴ PWM off, low-side short
+//!   last valid frame (seed 000 profile)
+//!        │  tick1 tick2 tick3 ..... tick5 ........ tick9
+//!   age: 0    1     2     3           5              9
+//!        NORMAL/REDUCED   HOLD        STOP           BRAKE (latched)
+//!                          │           │              │
+//!   setpoint: commanded    └ hold decel ┴ stop decel ─┴ PWM off, low-side short
 //!
 //!   With a frame every millisecond the age is 1 at every tick; one lost frame makes it 2 (no effect),
 //!   two missed cycles make it 3 (HOLD, seed: "2 missed cycles").
 //! ```
 //!
-//! `age` is the seed's watchdog counter turned around (seed: reload 10 on a valid frame, count down at
-//! 1 kHz, brake at 0): BRAKE comes at the 10th tick after the last valid frame, so at most 10 ms after it.
+//! The thresholds are the link profile's ([`Config`]): a 50 Hz link holds after 41 ticks, not 3. The
+//! profile's `brake_after` is the latest BRAKE; a frame's own `timeout` may bring it earlier. BRAKE at
+//! the 9th tick after seed 000's last valid frame is strictly within 10 ms of that frame's arrival
+//! (`config` module diagram).
+//!
+//! Every axis is driven in its own [`AxisMode`]; what each rung does to each mode:
+//!
+//! | mode     | NORMAL / REDUCED                      | HOLD, STOP                       | BRAKE |
+//! |----------|---------------------------------------|----------------------------------|-------|
+//! | coast    | no torque                             | no torque                        | short |
+//! | short    | short brake                           | short brake                      | short |
+//! | duty     | ramps to the target (≤ duty limit)    | ramps to zero (`duty_step`)      | short |
+//! | velocity | ramps to the target (≤ speed limit)   | decelerates (hold / stop step)   | short |
+//! | position | profile under a cap ramped to the command's cap (≤ speed limit) | cap falls to zero (hold / stop step): the axis comes to rest and holds there | short |
+//!
+//! An axis changes mode only from rest: a new drive mode first brings the old one to zero at its
+//! ramp, then takes over; a passive mode (coast, short) takes over at once.
 //!
 //! Ticks are the only clock: [`Ladder::step`] never reads time, so every transition is a function
 //! of the event sequence and can be checked exhaustively (see `proofs/SAFETY.md`).
 
 use crate::config::Config;
 use crate::types::{
-    Command, Condition, ControlMode, Drive, FaultFlags, Mode, Output, RejectReason, Speed,
+    AxisDrive, AxisMode, Command, Condition, Drive, FaultFlags, Mode, Output, Position,
+    RejectReason, Speed,
 };
-use crate::validate::{validate, Setpoint};
+use crate::validate::{validate, AxisSetpoint, Setpoint};
 
-/// Emergency-stop requests (seed 001 `ESTOP.action`).
+/// Emergency-stop requests (seed 001 `ESTOP.action`, the board's ESTOP input).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub enum Estop {
     /// Engage and latch the emergency stop (action = 1).
     Engage,
-    /// Release the latch (action = 0); BRAKE stays latched until a re-arm.
+    /// Release this source's hold on the latch (action = 0); BRAKE stays latched until a re-arm.
     Release,
+}
+
+/// Where a command comes from. ESTOP is owned by the sources that engaged it (INV-14).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+#[repr(u8)]
+pub enum Source {
+    /// The board's own ESTOP input: engages for itself, releases every source's ESTOP.
+    Local = 0,
+    /// The link that drives the axes (its frames are [`Event::Frame`]s).
+    Primary = 1,
+    /// A second link, e.g. a service port: may engage and release its own ESTOP and request re-arms.
+    Service = 2,
+}
+
+impl Source {
+    /// Every source.
+    pub const ALL: [Self; 3] = [Self::Local, Self::Primary, Self::Service];
+
+    /// This source's bit in an owner set.
+    pub const fn bit(self) -> u8 {
+        1 << self as u8
+    }
 }
 
 /// Everything that can happen to the ladder.
 #[derive(Clone, Copy, Debug, PartialEq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
-pub enum Event {
-    /// The 1 kHz watchdog tick: the only event that moves the setpoint.
+pub enum Event<const N: usize> {
+    /// The 1 kHz watchdog tick: the only event that moves the setpoints.
     Tick,
-    /// A frame that passed CRC and decoding; validated here.
-    Frame(Command),
-    /// A frame refused below the ladder (CRC, framing, decoding, version, parity).
+    /// A frame of the primary link that passed CRC and decoding; validated here.
+    Frame(Command<N>),
+    /// A frame refused below the ladder (CRC, framing, decoding, version, parity, unknown mode).
     Rejected(RejectReason),
     /// A board condition became active or cleared.
     Condition {
@@ -55,12 +94,17 @@ pub enum Event {
         /// True when it became active, false when it cleared.
         active: bool,
     },
-    /// Emergency stop engaged or released.
-    Estop(Estop),
+    /// Emergency stop engaged or released by a source.
+    Estop {
+        /// Who asks.
+        source: Source,
+        /// Engage or release.
+        action: Estop,
+    },
     /// The host's shutdown bit (seed 004 `SHUTDOWN_MOTOR`), asserted or not.
     Shutdown(bool),
-    /// An explicit re-arm request (a clear command from the host).
-    Rearm,
+    /// An explicit re-arm request (a clear command) from a source.
+    Rearm(Source),
 }
 
 /// Saturating event counters, reported in diagnostics.
@@ -81,8 +125,10 @@ pub struct Counters {
     pub brake_entries: u32,
     /// Re-arms that released BRAKE.
     pub rearms: u32,
-    /// Re-arm requests refused because a latching cause was still active.
+    /// Re-arm requests refused: a latching cause still active, or not the source that released ESTOP.
     pub rearm_refused: u32,
+    /// ESTOP releases refused: the source did not hold the ESTOP it tried to release.
+    pub estop_release_refused: u32,
 }
 
 impl Counters {
@@ -111,15 +157,25 @@ pub const LATCHING: FaultFlags = FaultFlags(
 pub const DEGRADING: FaultFlags =
     FaultFlags(FaultFlags::THERMAL_WARNING.0 | FaultFlags::CLOCK_SYNC_LOST.0);
 
-/// The whole fail-safe state. Every field is plain data; [`Ladder::step`] is the only way it changes.
+/// Every [`Source`]'s bit.
+const ALL_SOURCES: u8 = 0b111;
+
+/// The whole fail-safe state of `N` axes. Every field is plain data; [`Ladder::step`] is the only way it changes.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub struct Ladder {
+pub struct Ladder<const N: usize> {
     pub(crate) cfg: Config,
     pub(crate) mode: Mode,
-    /// Setpoints applied after the last tick, [left, right].
-    pub(crate) applied: [Speed; 2],
+    /// Per axis, after the last tick: the speed setpoint (velocity), the duty (duty), the speed cap
+    /// (position), zero (passive modes, and every axis in BRAKE).
+    pub(crate) applied: [Speed; N],
+    /// The mode each `applied` value is expressed in.
+    pub(crate) axis_modes: [AxisMode; N],
+    /// The position target in force per axis (used while the axis is in position mode); within the travel.
+    pub(crate) held: [Position; N],
     /// Last valid command; cleared when BRAKE latches.
-    pub(crate) last: Option<Setpoint>,
+    pub(crate) last: Option<Setpoint<N>>,
+    /// The comm-loss threshold in force: the last valid frame's, 1 ..= the profile's `brake_after`.
+    pub(crate) brake_after: u16,
     /// Enable bit of the last valid frame, for the 0→1 re-arm edge. Set to true whenever BRAKE latches,
     /// so only an enable = 0 frame seen after the latch, then an enable = 1 frame, makes an edge: a host that
     /// keeps sending enable = 1 across an MCU reset or a link loss never restarts the drive by itself.
@@ -131,6 +187,11 @@ pub struct Ladder {
     pub(crate) latch_causes: FaultFlags,
     /// Conditions active now, plus ESTOP and SHUTDOWN while set.
     pub(crate) active: FaultFlags,
+    /// The sources holding ESTOP engaged ([`Source::bit`]s); ESTOP is active exactly while non-empty.
+    pub(crate) estop_owners: u8,
+    /// The source whose release ended the last ESTOP; after an ESTOP latch only its re-arm counts
+    /// (any link's if it was the local input).
+    pub(crate) estop_released_by: Option<Source>,
     pub(crate) rearm_pending: bool,
     pub(crate) degraded: bool,
     /// Consecutive clean ticks while degraded.
@@ -173,20 +234,37 @@ pub const fn clamp_sym(x: Speed, limit: Speed) -> Speed {
     }
 }
 
-impl Ladder {
+const fn min_q(a: Speed, b: Speed) -> Speed {
+    if a.to_bits() < b.to_bits() {
+        a
+    } else {
+        b
+    }
+}
+
+/// True if `x` lies in `lo ..= hi`.
+fn in_range(x: Speed, lo: Speed, hi: Speed) -> bool {
+    x >= lo && x <= hi
+}
+
+impl<const N: usize> Ladder<N> {
     /// Power-on state: BRAKE latched with `POWER_ON`, so the drive starts only after an explicit arm
     /// (ISO 3691-4: no automatic start) and fresh valid frames.
     pub const fn new(cfg: Config) -> Self {
         Self {
-            cfg,
             mode: Mode::Brake,
-            applied: [Speed::ZERO; 2],
+            applied: [Speed::ZERO; N],
+            axis_modes: [AxisMode::Coast; N],
+            held: [cfg.params().travel_lo; N],
             last: None,
+            brake_after: cfg.params().brake_after,
             prev_enable: true,
             age: 0,
             brake_latched: true,
             latch_causes: FaultFlags::POWER_ON,
             active: FaultFlags::NONE,
+            estop_owners: 0,
+            estop_released_by: None,
             rearm_pending: false,
             degraded: true,
             clean_ticks: 0,
@@ -201,7 +279,9 @@ impl Ladder {
                 brake_entries: 0,
                 rearms: 0,
                 rearm_refused: 0,
+                estop_release_refused: 0,
             },
+            cfg,
         }
     }
 
@@ -215,19 +295,35 @@ impl Ladder {
         self.mode
     }
 
-    /// Setpoints applied after the last tick, [left, right] (zero in BRAKE).
-    pub const fn applied(&self) -> [Speed; 2] {
+    /// Per-axis values applied after the last tick (zero in BRAKE): speed, duty or position cap, by
+    /// each axis's mode ([`Self::axis_modes`]).
+    pub const fn applied(&self) -> [Speed; N] {
         self.applied
     }
 
+    /// The mode each axis is driven in.
+    pub const fn axis_modes(&self) -> [AxisMode; N] {
+        self.axis_modes
+    }
+
     /// The last valid command (None after BRAKE latched, until a new valid frame).
-    pub const fn last_valid(&self) -> Option<Setpoint> {
+    pub const fn last_valid(&self) -> Option<Setpoint<N>> {
         self.last
     }
 
     /// Watchdog ticks since the last valid frame.
     pub const fn age(&self) -> u16 {
         self.age
+    }
+
+    /// The comm-loss threshold in force (ticks since the last valid frame): BRAKE when the age reaches it.
+    pub const fn brake_after(&self) -> u16 {
+        self.brake_after
+    }
+
+    /// The sources holding ESTOP engaged, as [`Source::bit`]s.
+    pub const fn estop_owners(&self) -> u8 {
+        self.estop_owners
     }
 
     /// Event counters.
@@ -240,35 +336,81 @@ impl Ladder {
         self.brake_latched
     }
 
+    /// True if `sp` is what [`validate`] can return under this configuration.
+    fn setpoint_ok(&self, sp: &Setpoint<N>) -> bool {
+        let p = self.cfg.params();
+        sp.brake_after >= 1
+            && sp.brake_after <= p.brake_after
+            && sp.axes.iter().all(|a| {
+                p.modes.contains(a.mode)
+                    && match a.mode {
+                        AxisMode::Coast | AxisMode::Short => {
+                            a.target == Speed::ZERO && a.cap == Speed::ZERO
+                        }
+                        AxisMode::Duty => {
+                            in_range(a.target, p.duty_max.saturating_neg(), p.duty_max)
+                                && a.cap == Speed::ZERO
+                        }
+                        AxisMode::Velocity => {
+                            in_range(a.target, p.v_max.saturating_neg(), p.v_max)
+                                && a.cap == Speed::ZERO
+                        }
+                        AxisMode::Position => {
+                            in_range(a.target, p.travel_lo, p.travel_hi)
+                                && in_range(a.cap, Speed::ZERO, p.v_max)
+                        }
+                    }
+            })
+    }
+
+    /// True if `a` is a value an axis in mode `m` may hold.
+    fn applied_ok(&self, m: AxisMode, a: Speed) -> bool {
+        let p = self.cfg.params();
+        match m {
+            AxisMode::Coast | AxisMode::Short => a == Speed::ZERO,
+            AxisMode::Duty => in_range(a, p.duty_max.saturating_neg(), p.duty_max),
+            AxisMode::Velocity => in_range(a, p.v_max.saturating_neg(), p.v_max),
+            AxisMode::Position => in_range(a, Speed::ZERO, p.v_max),
+        }
+    }
+
     /// The invariant every reachable state satisfies (INV-0 in `proofs/SAFETY.md`).
     ///
     /// `Ladder::new` satisfies it and every [`Ladder::step`] preserves it (`verify_step_preserves_invariant`),
     /// so harnesses may start from any state that satisfies it: an over-approximation of the reachable set.
     pub fn is_valid(&self) -> bool {
         let p = self.cfg.params();
-        let within = |s: Speed| s <= p.v_max && s >= p.v_max.saturating_neg();
-        let applied_ok = self.applied.iter().all(|a| within(*a));
-        let last_ok = match self.last {
+        let axes_ok = self
+            .axis_modes
+            .iter()
+            .zip(self.applied.iter())
+            .all(|(m, a)| self.applied_ok(*m, *a))
+            && self
+                .held
+                .iter()
+                .all(|h| in_range(*h, p.travel_lo, p.travel_hi));
+        let last_ok = match &self.last {
             None => true,
-            Some(sp) => {
-                within(sp.left)
-                    && within(sp.right)
-                    && !matches!(sp.mode, ControlMode::Position | ControlMode::RawDuty)
-            }
+            Some(sp) => self.setpoint_ok(sp),
         };
         let mode_ok = match self.mode {
             Mode::Normal | Mode::Reduced => self.age < p.hold_after,
             Mode::Hold => self.age < p.stop_after,
             // STOP's bound (age < brake_after) is the unlatched clause below.
             Mode::Stop => true,
-            Mode::Brake => self.applied == [Speed::ZERO; 2],
+            Mode::Brake => self.applied.iter().all(|a| *a == Speed::ZERO),
         };
-        applied_ok
+        let estop_ok = self.estop_owners & !ALL_SOURCES == 0
+            && self.active.contains(FaultFlags::ESTOP) == (self.estop_owners != 0);
+        axes_ok
             && last_ok
             && mode_ok
+            && estop_ok
+            && self.brake_after >= 1
+            && self.brake_after <= p.brake_after
             && (self.mode == Mode::Brake) == self.brake_latched
             && self.brake_latched != self.latch_causes.is_empty()
-            && (self.brake_latched || (self.age < p.brake_after && self.last.is_some()))
+            && (self.brake_latched || (self.age < self.brake_after && self.last.is_some()))
             && (!self.active.intersects(LATCHING) || self.brake_latched)
             && (!self.rearm_pending || self.brake_latched)
             && self.window_pos < p.window
@@ -276,7 +418,7 @@ impl Ladder {
     }
 
     /// Feeds one event and returns what to apply. Never panics; all arithmetic saturates.
-    pub fn step(&mut self, event: Event) -> Output {
+    pub fn step(&mut self, event: Event<N>) -> Output<N> {
         match event {
             Event::Tick => self.tick(),
             Event::Frame(cmd) => self.frame(&cmd),
@@ -293,14 +435,20 @@ impl Ladder {
                     self.active = self.active.without(flag);
                 }
             }
-            // SR-9 / INV-6, INV-7: ESTOP latches at once; only `Release` clears the flag (INV-6).
-            Event::Estop(Estop::Engage) => {
+            // SR-9 / INV-6, INV-7: ESTOP latches at once, owned by the source that engaged it.
+            Event::Estop {
+                source,
+                action: Estop::Engage,
+            } => {
+                self.estop_owners |= source.bit();
+                self.estop_released_by = None;
                 self.active = self.active.union(FaultFlags::ESTOP);
                 self.latch(FaultFlags::ESTOP);
             }
-            Event::Estop(Estop::Release) => {
-                self.active = self.active.without(FaultFlags::ESTOP);
-            }
+            Event::Estop {
+                source,
+                action: Estop::Release,
+            } => self.release_estop(source),
             // SR-10 / INV-7: the host's shutdown bit turns the PWM off in this very step.
             Event::Shutdown(true) => {
                 self.active = self.active.union(FaultFlags::SHUTDOWN);
@@ -309,13 +457,13 @@ impl Ladder {
             Event::Shutdown(false) => {
                 self.active = self.active.without(FaultFlags::SHUTDOWN);
             }
-            Event::Rearm => self.request_rearm(),
+            Event::Rearm(source) => self.request_rearm(source),
         }
         self.output()
     }
 
     /// What the current state tells the bridge, without changing anything.
-    pub fn output(&self) -> Output {
+    pub fn output(&self) -> Output<N> {
         let p = self.cfg.params();
         let limit = match self.mode {
             Mode::Normal => p.v_max,
@@ -325,10 +473,25 @@ impl Ladder {
         let drive = if self.mode == Mode::Brake {
             Drive::Brake
         } else {
-            Drive::Run {
-                left: self.applied[0],
-                right: self.applied[1],
+            let mut axes = [AxisDrive::Coast; N];
+            for (((d, m), a), h) in axes
+                .iter_mut()
+                .zip(self.axis_modes.iter())
+                .zip(self.applied.iter())
+                .zip(self.held.iter())
+            {
+                *d = match m {
+                    AxisMode::Coast => AxisDrive::Coast,
+                    AxisMode::Short => AxisDrive::Short,
+                    AxisMode::Duty => AxisDrive::Duty(*a),
+                    AxisMode::Velocity => AxisDrive::Velocity(*a),
+                    AxisMode::Position => AxisDrive::Position {
+                        target: *h,
+                        cap: *a,
+                    },
+                };
             }
+            Drive::Run(axes)
         };
         let mut faults = self.active.union(self.latch_causes);
         if self.brake_latched {
@@ -346,7 +509,7 @@ impl Ladder {
         }
     }
 
-    /// SR-1, SR-6, SR-9, SR-10: enter BRAKE, zero the setpoint, forget the command, withdraw any re-arm.
+    /// SR-1, SR-6, SR-9, SR-10: enter BRAKE, zero the setpoints, forget the command, withdraw any re-arm.
     fn latch(&mut self, cause: FaultFlags) {
         if !self.brake_latched {
             self.counters.brake_entries = self.counters.brake_entries.saturating_add(1);
@@ -354,18 +517,47 @@ impl Ladder {
         self.brake_latched = true;
         self.latch_causes = self.latch_causes.union(cause);
         self.mode = Mode::Brake;
-        self.applied = [Speed::ZERO; 2];
+        self.applied = [Speed::ZERO; N];
         self.last = None;
         self.prev_enable = true;
         self.rearm_pending = false;
     }
 
-    /// SR-8 / INV-6: a re-arm is accepted only while no latching cause is active.
-    fn request_rearm(&mut self) {
+    /// SR-14 / INV-14: a source releases only its own ESTOP; the local input releases every source's.
+    fn release_estop(&mut self, source: Source) {
+        let owners = self.estop_owners;
+        if owners == 0 {
+            return;
+        }
+        let remaining = if source == Source::Local {
+            0
+        } else if owners & source.bit() == 0 {
+            self.counters.estop_release_refused =
+                self.counters.estop_release_refused.saturating_add(1);
+            return;
+        } else {
+            owners & !source.bit()
+        };
+        self.estop_owners = remaining;
+        if remaining == 0 {
+            self.active = self.active.without(FaultFlags::ESTOP);
+            self.estop_released_by = Some(source);
+        }
+    }
+
+    /// SR-8 / INV-6, SR-14 / INV-14: a re-arm is accepted only while no latching cause is active, and
+    /// after an ESTOP latch only from the source that released it (any link after a local release).
+    fn request_rearm(&mut self, source: Source) {
         if !self.brake_latched {
             return;
         }
-        if self.active.intersects(LATCHING) {
+        let estop_ok = !self.latch_causes.contains(FaultFlags::ESTOP)
+            || match self.estop_released_by {
+                Some(Source::Local) => true,
+                Some(s) => s == source,
+                None => false,
+            };
+        if self.active.intersects(LATCHING) || !estop_ok {
             self.counters.rearm_refused = self.counters.rearm_refused.saturating_add(1);
             self.rearm_pending = false;
         } else {
@@ -392,7 +584,7 @@ impl Ladder {
     }
 
     /// SR-3, SR-4: validate, then (and only then) take the command and reset the age.
-    fn frame(&mut self, cmd: &Command) {
+    fn frame(&mut self, cmd: &Command<N>) {
         let p = self.cfg.params();
         let allowance = p
             .max_cmd_step
@@ -403,10 +595,11 @@ impl Ladder {
                 self.counters.valid_frames = self.counters.valid_frames.saturating_add(1);
                 let rising = sp.enable && !self.prev_enable;
                 self.prev_enable = sp.enable;
+                self.brake_after = sp.brake_after;
                 self.last = Some(sp);
                 self.age = 0;
                 if rising {
-                    self.request_rearm();
+                    self.request_rearm(Source::Primary);
                 }
             }
         }
@@ -427,8 +620,9 @@ impl Ladder {
             self.window_strikes = 0;
         }
 
-        // SR-1 / INV-1: BRAKE at the brake_after-th tick (≤ 10) after the last valid frame.
-        if self.age >= p.brake_after {
+        // SR-1, SR-16 / INV-1, INV-18: BRAKE at the threshold in force (the profile's brake_after or the
+        // last frame's timeout, whichever is earlier) after the last valid frame.
+        if self.age >= self.brake_after {
             self.latch(FaultFlags::COMM_LOST);
         }
 
@@ -442,6 +636,7 @@ impl Ladder {
         {
             self.brake_latched = false;
             self.latch_causes = FaultFlags::NONE;
+            self.estop_released_by = None;
             self.rearm_pending = false;
             self.degraded = true;
             self.clean_ticks = 0;
@@ -482,34 +677,87 @@ impl Ladder {
         }
 
         self.mode = mode;
-        // SR-5 / INV-3, INV-8: the setpoint moves toward the rung's target by at most one step per tick.
-        self.applied = match mode {
-            Mode::Brake => [Speed::ZERO; 2],
-            Mode::Stop => self
-                .applied
-                .map(|a| approach(a, Speed::ZERO, p.stop_decel_step)),
-            Mode::Hold => self
-                .applied
-                .map(|a| approach(a, Speed::ZERO, p.hold_decel_step)),
-            Mode::Normal | Mode::Reduced => {
-                let limit = if mode == Mode::Normal {
-                    p.v_max
-                } else {
-                    p.reduced_limit
-                };
-                let [tl, tr] = match self.last {
-                    Some(sp) if sp.drives() => {
-                        [clamp_sym(sp.left, limit), clamp_sym(sp.right, limit)]
-                    }
-                    _ => [Speed::ZERO; 2],
-                };
-                [
-                    approach(self.applied[0], tl, p.accel_step),
-                    approach(self.applied[1], tr, p.accel_step),
-                ]
-            }
+        if mode == Mode::Brake {
+            self.applied = [Speed::ZERO; N];
+            return;
+        }
+        let wants = match &self.last {
+            Some(sp) => sp.axes,
+            // Unreachable outside BRAKE (INV-0); coasting is the answer that drives nothing.
+            None => [AxisSetpoint::passive(AxisMode::Coast); N],
         };
+        for (((a, m), h), want) in self
+            .applied
+            .iter_mut()
+            .zip(self.axis_modes.iter_mut())
+            .zip(self.held.iter_mut())
+            .zip(wants.iter())
+        {
+            (*a, *m, *h) = axis_tick(&p, mode, *a, *m, *h, want);
+        }
     }
+}
+
+/// One axis, one tick outside BRAKE: (applied, mode, held position target) after it.
+///
+/// SR-5, SR-15 / INV-3, INV-8, INV-16, INV-17, INV-19: every value moves toward the rung's target by at most its
+/// step; a passive mode takes over at once and applies nothing; a drive mode takes over from rest only.
+fn axis_tick(
+    p: &crate::config::ConfigParams,
+    mode: Mode,
+    applied: Speed,
+    m: AxisMode,
+    held: Position,
+    want: &AxisSetpoint,
+) -> (Speed, AxisMode, Position) {
+    let m = if want.mode != m && (want.mode.is_passive() || applied == Speed::ZERO) {
+        want.mode
+    } else {
+        m
+    };
+    // While the old mode still moves, its target is zero: the axis comes to rest before it switches.
+    let switching = want.mode != m;
+    let held = if m == AxisMode::Position && want.mode == AxisMode::Position {
+        want.target
+    } else {
+        held
+    };
+    let running = matches!(mode, Mode::Normal | Mode::Reduced) && !switching;
+    let reduced = mode == Mode::Reduced;
+    let speed_limit = if reduced { p.reduced_limit } else { p.v_max };
+    let (target, step) = match (m, mode) {
+        (AxisMode::Coast | AxisMode::Short, _) => (Speed::ZERO, Speed::MAX),
+        (AxisMode::Duty, _) => {
+            let limit = if reduced { p.duty_reduced } else { p.duty_max };
+            let t = if running {
+                clamp_sym(want.target, limit)
+            } else {
+                Speed::ZERO
+            };
+            (t, p.duty_step)
+        }
+        (AxisMode::Velocity | AxisMode::Position, Mode::Hold) => (Speed::ZERO, p.hold_decel_step),
+        (AxisMode::Velocity | AxisMode::Position, Mode::Stop | Mode::Brake) => {
+            (Speed::ZERO, p.stop_decel_step)
+        }
+        (AxisMode::Velocity, _) => {
+            let t = if running {
+                clamp_sym(want.target, speed_limit)
+            } else {
+                Speed::ZERO
+            };
+            (t, p.accel_step)
+        }
+        (AxisMode::Position, _) => {
+            let t = if running {
+                min_q(want.cap, speed_limit)
+            } else {
+                Speed::ZERO
+            };
+            (t, p.accel_step)
+        }
+    };
+    (approach(applied, target, step), m, held)
 }
 
 #[cfg(test)]
@@ -519,19 +767,25 @@ mod tests {
 
     const P: ConfigParams = ConfigParams::DEFAULT;
 
-    fn cmd(speed: f32, enable: bool) -> Event {
-        Event::Frame(Command {
-            left: speed,
-            right: -speed,
-            mode: 1,
-            enable,
-            seq: None,
-        })
+    type L = Ladder<2>;
+
+    fn cmd(speed: f32, enable: bool) -> Event<2> {
+        Event::Frame(Command::velocity([speed, -speed], enable, None))
     }
 
+    const PRIMARY_ENGAGE: Event<2> = Event::Estop {
+        source: Source::Primary,
+        action: Estop::Engage,
+    };
+    const PRIMARY_RELEASE: Event<2> = Event::Estop {
+        source: Source::Primary,
+        action: Estop::Release,
+    };
+    const REARM: Event<2> = Event::Rearm(Source::Primary);
+
     /// A ladder armed the way a host does it: enable 0, then enable 1, frame + tick each millisecond.
-    fn armed() -> Ladder {
-        let mut l = Ladder::new(Config::DEFAULT);
+    fn armed() -> L {
+        let mut l = L::new(Config::DEFAULT);
         l.step(cmd(0.0, false));
         l.step(Event::Tick);
         l.step(cmd(0.0, true));
@@ -541,7 +795,7 @@ mod tests {
     }
 
     /// Frame + tick per millisecond until the ladder runs NORMAL at `speed` (rad/s).
-    fn cruising(speed: f32) -> Ladder {
+    fn cruising(speed: f32) -> L {
         let mut l = armed();
         let mut v = 0.0f32;
         for _ in 0..2000 {
@@ -556,7 +810,7 @@ mod tests {
 
     #[test]
     fn power_on_is_braked_and_ticks_alone_never_arm() {
-        let mut l = Ladder::new(Config::DEFAULT);
+        let mut l = L::new(Config::DEFAULT);
         assert!(l.is_valid());
         for _ in 0..100 {
             assert_eq!(l.step(Event::Tick).drive, Drive::Brake);
@@ -574,8 +828,9 @@ mod tests {
         // `cruising` ends with frame + tick: the first tick after the last valid frame has passed.
         let mut l = cruising(5.0);
         assert_eq!(l.age(), 1);
-        // Seed 000: HOLD after 2 missed cycles (age 3), BRAKE at 10 ms (age 10); STOP at the seed's
-        // WDG_HOLD_LEVEL (5). Index = ticks since the last valid frame, from the 2nd to the 10th.
+        // Seed 000: HOLD after 2 missed cycles (age 3), STOP at the seed's WDG_HOLD_LEVEL (5), BRAKE at
+        // the 9th tick, so strictly within 10 ms of the last frame's arrival (the seed's "10 ms" counted
+        // from the frame, not from the next tick). Index = ticks since the last valid frame.
         let expected = [
             (2, Mode::Normal),
             (3, Mode::Hold),
@@ -584,8 +839,7 @@ mod tests {
             (6, Mode::Stop),
             (7, Mode::Stop),
             (8, Mode::Stop),
-            (9, Mode::Stop),
-            (10, Mode::Brake),
+            (9, Mode::Brake),
         ];
         for (age, want) in expected {
             let out = l.step(Event::Tick);
@@ -678,13 +932,7 @@ mod tests {
         l.step(cmd(8.0, true));
         assert_eq!(l.applied(), before.applied());
         assert_eq!(l.counters().rejected(RejectReason::Acceleration), 1);
-        l.step(Event::Frame(Command {
-            left: f32::NAN,
-            right: 0.0,
-            mode: 1,
-            enable: true,
-            seq: None,
-        }));
+        l.step(Event::Frame(Command::velocity([f32::NAN, 0.0], true, None)));
         assert_eq!(l.counters().rejected(RejectReason::NonFinite), 1);
         // Third reject in the window: REDUCED from the next tick, speed ramps down to the reduced limit.
         l.step(cmd(4.0, true));
@@ -712,19 +960,19 @@ mod tests {
     #[test]
     fn estop_latches_and_needs_release_then_rearm_then_fresh_frames() {
         let mut l = cruising(2.0);
-        let out = l.step(Event::Estop(Estop::Engage));
+        let out = l.step(PRIMARY_ENGAGE);
         assert_eq!(out.drive, Drive::Brake, "same step");
         // Re-arm while engaged: refused.
-        l.step(Event::Rearm);
+        l.step(REARM);
         assert_eq!(l.counters().rearm_refused, 1);
         l.step(cmd(0.0, true));
         assert_eq!(l.step(Event::Tick).mode, Mode::Brake);
         // Release alone does not restart.
-        l.step(Event::Estop(Estop::Release));
+        l.step(PRIMARY_RELEASE);
         l.step(cmd(0.0, true));
         assert_eq!(l.step(Event::Tick).mode, Mode::Brake);
         // Explicit re-arm, but no fresh frame before the tick: still braked.
-        l.step(Event::Rearm);
+        l.step(REARM);
         assert_eq!(l.step(Event::Tick).mode, Mode::Brake);
         l.step(cmd(0.0, true));
         assert_eq!(l.step(Event::Tick).mode, Mode::Reduced);
@@ -791,10 +1039,10 @@ mod tests {
         assert_eq!(out.mode, Mode::Stop);
         assert_eq!(
             out.drive,
-            Drive::Run {
-                left: Speed::from_num(2) - P.stop_decel_step,
-                right: -(Speed::from_num(2) - P.stop_decel_step)
-            }
+            Drive::Run([
+                AxisDrive::Velocity(Speed::from_num(2) - P.stop_decel_step),
+                AxisDrive::Velocity(-(Speed::from_num(2) - P.stop_decel_step))
+            ])
         );
         l.step(cmd(0.0, true));
         assert_ne!(l.step(Event::Tick).mode, Mode::Stop);
@@ -845,12 +1093,12 @@ mod tests {
         let v = P.v_max;
         let brake = {
             let mut l = good;
-            l.step(Event::Estop(Estop::Engage));
+            l.step(PRIMARY_ENGAGE);
             l
         };
         assert!(brake.is_valid());
-        type Breaker = (&'static str, fn(&mut Ladder));
-        let broken: [Breaker; 15] = [
+        type Breaker = (&'static str, fn(&mut L));
+        let broken: [Breaker; 22] = [
             ("applied beyond v_max", |l| {
                 l.applied[0] = P.v_max + Speed::from_bits(1)
             }),
@@ -858,16 +1106,40 @@ mod tests {
                 l.applied[1] = -P.v_max - Speed::from_bits(1)
             }),
             ("last beyond v_max", |l| {
-                l.last = l.last.map(|s| Setpoint {
-                    right: P.v_max + Speed::from_bits(1),
-                    ..s
-                })
+                if let Some(sp) = l.last.as_mut() {
+                    sp.axes[1].target = P.v_max + Speed::from_bits(1);
+                }
             }),
-            ("last in position mode", |l| {
-                l.last = l.last.map(|s| Setpoint {
-                    mode: ControlMode::Position,
-                    ..s
-                })
+            ("last in a mode the profile refuses", |l| {
+                if let Some(sp) = l.last.as_mut() {
+                    sp.axes[0].mode = AxisMode::Position;
+                }
+            }),
+            ("last with a zero threshold", |l| {
+                if let Some(sp) = l.last.as_mut() {
+                    sp.brake_after = 0;
+                }
+            }),
+            ("threshold in force beyond the profile's", |l| {
+                l.brake_after = P.brake_after + 1
+            }),
+            ("age at the threshold in force while running", |l| {
+                l.brake_after = 4;
+                l.age = 4;
+                l.mode = Mode::Hold;
+            }),
+            ("coasting axis with a value", |l| {
+                l.axis_modes[0] = AxisMode::Coast;
+            }),
+            ("position cap below zero", |l| {
+                l.axis_modes[0] = AxisMode::Position;
+                l.applied[0] = -Speed::from_bits(1);
+            }),
+            ("held position beyond the travel", |l| {
+                l.held[1] = P.travel_hi + Speed::from_bits(1)
+            }),
+            ("ESTOP owner without the flag", |l| {
+                l.estop_owners = Source::Service.bit()
             }),
             ("NORMAL with a late link", |l| l.age = P.hold_after),
             ("HOLD at the stop age", |l| {
@@ -915,7 +1187,7 @@ mod tests {
 
     #[test]
     fn every_latching_cause_blocks_rearm_and_warnings_do_not_latch() {
-        let latching: [Event; 6] = [
+        let latching: [Event<2>; 6] = [
             Event::Condition {
                 condition: Condition::Overcurrent,
                 active: true,
@@ -932,13 +1204,13 @@ mod tests {
                 condition: Condition::Undervoltage,
                 active: true,
             },
-            Event::Estop(Estop::Engage),
+            PRIMARY_ENGAGE,
             Event::Shutdown(true),
         ];
         for e in latching {
             let mut l = cruising(1.0);
             assert_eq!(l.step(e).drive, Drive::Brake, "{e:?}");
-            l.step(Event::Rearm);
+            l.step(REARM);
             assert_eq!(l.counters().rearm_refused, 1, "{e:?}");
         }
         for c in [Condition::ThermalWarning, Condition::ClockSyncLost] {
@@ -966,7 +1238,7 @@ mod tests {
         l.step(Event::Tick);
         assert_eq!(l.counters().missed_ticks, c0.missed_ticks + 2);
         // One BRAKE episode with several causes counts once.
-        l.step(Event::Estop(Estop::Engage));
+        l.step(PRIMARY_ENGAGE);
         l.step(Event::Condition {
             condition: Condition::Overcurrent,
             active: true,
@@ -977,18 +1249,18 @@ mod tests {
     }
 
     #[test]
-    fn idle_mode_targets_zero_whatever_speeds_it_carries() {
-        let mut l = cruising(2.0);
-        for _ in 0..100 {
-            l.step(Event::Frame(Command {
-                left: 2.0,
-                right: -2.0,
-                mode: 0,
-                enable: true,
-                seq: None,
-            }));
+    fn a_zero_target_is_never_an_acceleration_fault_and_ramps_down() {
+        // Seed 000's idle mode decodes into zero velocity targets: stopping is always allowed, and the
+        // setpoint still ramps down at accel_step (5 rad/s at 0.05 rad/s per tick: 100 ticks).
+        let mut l = cruising(5.0);
+        for k in 0..101 {
+            l.step(Event::Frame(Command::velocity([0.0, 0.0], true, None)));
             l.step(Event::Tick);
+            if k == 50 {
+                assert!(l.applied()[0] > Speed::ZERO, "still ramping at tick {k}");
+            }
         }
+        assert_eq!(l.counters().rejected_total(), 0);
         assert_eq!(l.applied(), [Speed::ZERO; 2]);
         assert_eq!(l.mode(), Mode::Normal);
     }
@@ -1015,5 +1287,219 @@ mod tests {
                 "{a} {h} {st}"
             );
         }
+    }
+
+    /// Arms a ladder of `N` axes under `cfg` with `c` the way a host does it: enable 0, then 1.
+    fn armed_with<const N: usize>(cfg: Config, c: Command<N>) -> Ladder<N> {
+        let mut l = Ladder::<N>::new(cfg);
+        l.step(Event::Frame(Command { enable: false, ..c }));
+        l.step(Event::Tick);
+        l.step(Event::Frame(c));
+        assert_eq!(l.step(Event::Tick).mode, Mode::Reduced, "armed");
+        l
+    }
+
+    #[test]
+    fn estop_belongs_to_the_source_that_engaged_it() {
+        let mut l = cruising(2.0);
+        let service = |action| Event::Estop {
+            source: Source::Service,
+            action,
+        };
+        assert_eq!(l.step(service(Estop::Engage)).drive, Drive::Brake);
+        // The driving link cannot release the service port's ESTOP, nor re-arm past it.
+        l.step(PRIMARY_RELEASE);
+        assert_eq!(l.counters().estop_release_refused, 1);
+        assert!(l.output().faults.contains(FaultFlags::ESTOP));
+        l.step(REARM);
+        assert_eq!(l.counters().rearm_refused, 1);
+        // Released by its owner: now only the owner's re-arm counts.
+        l.step(service(Estop::Release));
+        assert!(!l.active.contains(FaultFlags::ESTOP));
+        assert_eq!(l.estop_owners(), 0);
+        l.step(cmd(0.0, false));
+        l.step(Event::Tick);
+        l.step(cmd(0.0, true)); // the driving link's enable edge is its re-arm request: refused
+        assert_eq!(l.step(Event::Tick).mode, Mode::Brake);
+        assert_eq!(l.counters().rearm_refused, 2);
+        l.step(Event::Rearm(Source::Service));
+        l.step(cmd(0.0, true));
+        assert_eq!(
+            l.step(Event::Tick).mode,
+            Mode::Reduced,
+            "the releasing source re-armed"
+        );
+    }
+
+    #[test]
+    fn the_local_input_releases_every_source_and_any_link_may_rearm() {
+        let mut l = cruising(2.0);
+        l.step(PRIMARY_ENGAGE);
+        l.step(Event::Estop {
+            source: Source::Service,
+            action: Estop::Engage,
+        });
+        assert_eq!(
+            l.estop_owners(),
+            Source::Primary.bit() | Source::Service.bit()
+        );
+        // Releasing one of two owners keeps ESTOP.
+        l.step(PRIMARY_RELEASE);
+        assert!(l.output().faults.contains(FaultFlags::ESTOP));
+        l.step(Event::Estop {
+            source: Source::Local,
+            action: Estop::Release,
+        });
+        assert!(!l.active.contains(FaultFlags::ESTOP));
+        l.step(REARM);
+        l.step(cmd(0.0, true));
+        assert_eq!(l.step(Event::Tick).mode, Mode::Reduced);
+    }
+
+    #[test]
+    fn a_frame_timeout_brings_brake_earlier_never_later() {
+        let duty = |timeout_ms: Option<u16>| Command::<4> {
+            timeout: timeout_ms.and_then(crate::config::brake_age_for_timeout_ms),
+            ..Command::uniform(crate::types::AxisCommand::duty(0.2), true, None)
+        };
+        for (timeout_ms, brake_tick) in [
+            (Some(200), 199),
+            (None, 249),
+            (Some(5000), 249),
+            (Some(30), 29),
+        ] {
+            let mut l = armed_with(Config::CDC, duty(timeout_ms));
+            // The last valid frame; tick k makes age k.
+            l.step(Event::Frame(duty(timeout_ms)));
+            for k in 1..=brake_tick {
+                let out = l.step(Event::Tick);
+                assert_eq!(
+                    out.mode == Mode::Brake,
+                    k == brake_tick,
+                    "timeout {timeout_ms:?}, tick {k}"
+                );
+            }
+        }
+    }
+
+    #[test]
+    fn duty_axes_ramp_coast_at_once_and_fall_to_zero_when_the_link_is_late() {
+        let cfg = Config::CDC;
+        let p = *cfg.params();
+        let c = Command::<4> {
+            axes: [
+                crate::types::AxisCommand::duty(0.5),
+                crate::types::AxisCommand::duty(-0.5),
+                crate::types::AxisCommand::COAST,
+                crate::types::AxisCommand::duty(1.0),
+            ],
+            ..Command::uniform(crate::types::AxisCommand::COAST, true, None)
+        };
+        let mut l = armed_with(cfg, c);
+        // REDUCED after arming: duties ramp by duty_step toward ±duty_reduced.
+        assert_eq!(l.applied()[0], p.duty_step);
+        assert_eq!(l.applied()[1], -p.duty_step);
+        let Drive::Run(axes) = l.output().drive else {
+            panic!("running")
+        };
+        assert_eq!(axes[2], AxisDrive::Coast);
+        for _ in 0..400 {
+            l.step(Event::Frame(c));
+            l.step(Event::Tick);
+        }
+        assert_eq!(l.applied()[3], p.duty_reduced, "REDUCED caps the duty");
+        // Late link: HOLD at age 41, duties fall by duty_step per tick, never reverse. The last tick
+        // above made age 1; 40 more make it 41.
+        let before = l.applied();
+        for _ in 0..40 {
+            l.step(Event::Tick);
+        }
+        assert_eq!(l.mode(), Mode::Hold);
+        assert_eq!(l.applied()[3], before[3] - p.duty_step);
+        for _ in 0..100 {
+            l.step(Event::Tick);
+        }
+        assert_eq!(l.mode(), Mode::Stop);
+        assert_eq!(l.applied(), [Speed::ZERO; 4]);
+    }
+
+    #[test]
+    fn a_position_axis_runs_under_a_cap_that_falls_to_zero_when_the_link_is_late() {
+        let cfg = Config::PI_SPI;
+        let p = *cfg.params();
+        let c = Command::<2>::uniform(crate::types::AxisCommand::position(1.5, 4.0), true, None);
+        let mut l = armed_with(cfg, c);
+        let target = Speed::from_num(1.5);
+        assert_eq!(
+            l.output().drive,
+            Drive::Run(
+                [AxisDrive::Position {
+                    target,
+                    cap: p.accel_step
+                }; 2]
+            )
+        );
+        for _ in 0..2000 {
+            l.step(Event::Frame(c));
+            l.step(Event::Tick);
+        }
+        assert_eq!(l.mode(), Mode::Normal);
+        assert_eq!(
+            l.applied()[0],
+            Speed::from_num(4),
+            "the cap reaches the command's"
+        );
+        // Age 1 after the loop; 20 more ticks: age 21, the first HOLD tick.
+        for _ in 0..20 {
+            l.step(Event::Tick);
+        }
+        assert_eq!(l.mode(), Mode::Hold);
+        assert_eq!(l.applied()[0], Speed::from_num(4) - p.hold_decel_step);
+        assert_eq!(
+            l.output().drive,
+            Drive::Run(
+                [AxisDrive::Position {
+                    target,
+                    cap: l.applied()[0]
+                }; 2]
+            ),
+            "HOLD keeps the target and lowers the cap"
+        );
+    }
+
+    #[test]
+    fn an_axis_changes_drive_mode_only_from_rest() {
+        let cfg = Config::PI_SPI;
+        let v = Command::<2>::uniform(crate::types::AxisCommand::velocity(1.0), true, None);
+        let mut l = armed_with(cfg, v);
+        for _ in 0..100 {
+            l.step(Event::Frame(v));
+            l.step(Event::Tick);
+        }
+        assert_eq!(l.applied()[0], Speed::from_num(1));
+        let d = Command::<2>::uniform(crate::types::AxisCommand::duty(0.5), true, None);
+        let mut ticks = 0;
+        while l.axis_modes()[0] == AxisMode::Velocity {
+            l.step(Event::Frame(d));
+            l.step(Event::Tick);
+            ticks += 1;
+            assert!(ticks < 100, "velocity ramps down first");
+        }
+        // 1 rad/s at 0.05 rad/s per tick: 20 ticks to rest, the switch at the tick after.
+        assert_eq!(ticks, 21);
+        assert_eq!(l.axis_modes()[0], AxisMode::Duty);
+        // Coasting takes over at once, whatever the axis was doing.
+        for _ in 0..50 {
+            l.step(Event::Frame(d));
+            l.step(Event::Tick);
+        }
+        assert!(l.applied()[0] > Speed::ZERO);
+        l.step(Event::Frame(Command::uniform(
+            crate::types::AxisCommand::COAST,
+            true,
+            None,
+        )));
+        l.step(Event::Tick);
+        assert_eq!(l.output().drive, Drive::Run([AxisDrive::Coast; 2]));
     }
 }

@@ -8,36 +8,185 @@ use fixed::types::I16F16;
 /// becomes a `Speed` only after [`crate::validate`] has checked it.
 pub type Speed = I16F16;
 
-/// What the host asks the wheels to do; the shape every wire format decodes into.
-///
-/// Floats are kept as they came off the wire; nothing here has been checked yet.
+/// The most axes a ladder drives (seed 001 and seed 004 boards have four motors).
+pub const MAX_AXES: usize = 4;
+
+/// A position in rad at the axis (joint angle or wheel angle), Q16.16 (range ±32768 rad).
+pub type Position = I16F16;
+
+/// An open-loop PWM duty as a fraction of full scale, Q16.16 in [-1, 1] (sign = direction).
+pub type Duty = I16F16;
+
+/// How one axis is driven: the drive modes every seed's link maps onto.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+#[repr(u8)]
+pub enum AxisMode {
+    /// No torque: every bridge switch open, the axis runs down freely (seed 004 OFF, seed 001 `pwm = 0`).
+    Coast = 0,
+    /// Short brake: both low sides on, the motor brakes on its own back-EMF (seed 004 PASSIV_BRAKE).
+    Short = 1,
+    /// Open-loop duty, target in [-1, 1] of full scale (seed 001 `pwm / 1000`, seed 004 PWM `/ 399`).
+    Duty = 2,
+    /// Closed-loop speed, target in rad/s (seed 000 speed mode, seed 004 MAV).
+    Velocity = 3,
+    /// Closed-loop position, target in rad, moved by a trapezoidal profile under a speed cap in rad/s
+    /// (seed 003 motor angles, seed 004 MTP).
+    Position = 4,
+}
+
+impl AxisMode {
+    /// Every mode, in code order.
+    pub const ALL: [Self; 5] = [
+        Self::Coast,
+        Self::Short,
+        Self::Duty,
+        Self::Velocity,
+        Self::Position,
+    ];
+
+    /// True for the modes that put no drive torque on the axis (coast, short brake).
+    pub const fn is_passive(self) -> bool {
+        matches!(self, Self::Coast | Self::Short)
+    }
+}
+
+/// A set of [`AxisMode`]s: the modes a link profile lets its host ask for.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct ModeSet(pub u8);
+
+impl ModeSet {
+    /// Velocity only (seed 000: its position and raw-duty modes are refused).
+    pub const VELOCITY: Self = Self::of(AxisMode::Velocity);
+    /// Every mode.
+    pub const ALL: Self = Self(0b1_1111);
+
+    /// The set holding only `m`.
+    pub const fn of(m: AxisMode) -> Self {
+        Self(1 << m as u8)
+    }
+
+    /// This set and `m`.
+    pub const fn with(self, m: AxisMode) -> Self {
+        Self(self.0 | Self::of(m).0)
+    }
+
+    /// True if `m` is in the set.
+    pub const fn contains(self, m: AxisMode) -> bool {
+        self.0 & Self::of(m).0 != 0
+    }
+}
+
+/// What the host asks of one axis; floats as they came off the wire, unchecked.
 #[derive(Clone, Copy, Debug, PartialEq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
-pub struct Command {
-    /// Left wheel speed, rad/s at the wheel.
-    pub left: f32,
-    /// Right wheel speed, rad/s at the wheel.
-    pub right: f32,
-    /// Raw control mode as sent (seed 000: 0 idle, 1 speed, 2 position, 3 raw duty).
-    pub mode: u32,
+pub struct AxisCommand {
+    /// The drive mode asked for.
+    pub mode: AxisMode,
+    /// Duty fraction ([`AxisMode::Duty`]), rad/s ([`AxisMode::Velocity`]) or rad ([`AxisMode::Position`]);
+    /// ignored by the passive modes.
+    pub target: f32,
+    /// Speed cap in rad/s for [`AxisMode::Position`]; ignored by the other modes.
+    pub cap: f32,
+}
+
+impl AxisCommand {
+    /// A velocity target in rad/s.
+    pub const fn velocity(target: f32) -> Self {
+        Self {
+            mode: AxisMode::Velocity,
+            target,
+            cap: 0.0,
+        }
+    }
+
+    /// A duty target as a fraction of full scale.
+    pub const fn duty(target: f32) -> Self {
+        Self {
+            mode: AxisMode::Duty,
+            target,
+            cap: 0.0,
+        }
+    }
+
+    /// A position target in rad, reached at no more than `cap` rad/s.
+    pub const fn position(target: f32, cap: f32) -> Self {
+        Self {
+            mode: AxisMode::Position,
+            target,
+            cap,
+        }
+    }
+
+    /// No torque.
+    pub const COAST: Self = Self {
+        mode: AxisMode::Coast,
+        target: 0.0,
+        cap: 0.0,
+    };
+
+    /// Short brake.
+    pub const SHORT: Self = Self {
+        mode: AxisMode::Short,
+        target: 0.0,
+        cap: 0.0,
+    };
+}
+
+/// What the host asks the `N` axes to do; the shape every wire format decodes into.
+///
+/// Nothing here has been checked yet: [`crate::validate`] does that.
+#[derive(Clone, Copy, Debug, PartialEq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct Command<const N: usize> {
+    /// One request per axis.
+    pub axes: [AxisCommand; N],
     /// Drive enable as sent (0 disabled, anything else enabled).
     pub enable: bool,
     /// Sequence number, where the link carries one; used to refuse repeated and stale frames.
     pub seq: Option<u32>,
+    /// The frame's own comm-loss threshold in ticks since it arrived (seed 001 `timeout_ms`, see
+    /// [`crate::config::brake_age_for_timeout_ms`]), where the link carries one; the profile's
+    /// `brake_after` caps it.
+    pub timeout: Option<u16>,
 }
 
-/// The control modes of seed 000's `MotorCommand.control_mode`.
+impl<const N: usize> Command<N> {
+    /// Velocity targets for every axis, no timeout of its own.
+    pub fn velocity(targets: [f32; N], enable: bool, seq: Option<u32>) -> Self {
+        Self {
+            axes: targets.map(AxisCommand::velocity),
+            enable,
+            seq,
+            timeout: None,
+        }
+    }
+
+    /// The same request for every axis.
+    pub const fn uniform(axis: AxisCommand, enable: bool, seq: Option<u32>) -> Self {
+        Self {
+            axes: [axis; N],
+            enable,
+            seq,
+            timeout: None,
+        }
+    }
+}
+
+/// The control modes of seed 000's `MotorCommand.control_mode` (wire values); `protocol::amr` maps
+/// them onto [`AxisMode`]s, and the seed 000 profile accepts only velocity.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
 #[repr(u8)]
 pub enum ControlMode {
     /// Motors idle: zero speed target, speed loop active.
     Idle = 0,
-    /// Closed-loop wheel speed, the only mode that drives the wheels under the ladder.
+    /// Closed-loop wheel speed ([`AxisMode::Velocity`]).
     Speed = 1,
-    /// Position control; defined by the seed, refused by this firmware (no limit applies to it).
+    /// Position control ([`AxisMode::Position`]); refused by the seed 000 profile.
     Position = 2,
-    /// Raw PWM duty; defined by the seed, refused by this firmware (it would bypass the speed limits).
+    /// Raw PWM duty ([`AxisMode::Duty`]); refused by the seed 000 profile (it would bypass the speed loop).
     RawDuty = 3,
 }
 
@@ -69,11 +218,11 @@ pub enum RejectReason {
     Version = 4,
     /// A speed was NaN or infinite.
     NonFinite = 5,
-    /// A speed exceeded ±v_max.
+    /// A target or cap outside its mode's range (±v_max, ±duty_max, the travel), or a zero timeout.
     OutOfRange = 6,
     /// Control mode value not defined by the protocol.
     UnknownMode = 7,
-    /// Control mode defined but not driven by this firmware (position, raw duty).
+    /// Drive mode defined but not accepted by the active link profile.
     UnsupportedMode = 8,
     /// Change from the last valid command faster than the acceleration limit allows.
     Acceleration = 9,
@@ -234,27 +383,63 @@ pub enum Mode {
     Brake = 4,
 }
 
+/// What one axis's bridge is told to do outside BRAKE.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum AxisDrive {
+    /// Every switch open: no torque.
+    Coast,
+    /// Low sides on: the motor brakes on its own back-EMF.
+    Short,
+    /// Open-loop duty in [-1, 1] of full scale.
+    Duty(Duty),
+    /// Speed loop active with this setpoint (rad/s).
+    Velocity(Speed),
+    /// Position loop active: move toward `target` (rad) at no more than `cap` (rad/s, ≥ 0); with
+    /// `cap` = 0 the axis holds where its profile stands.
+    Position {
+        /// Position target, within the profile's travel.
+        target: Position,
+        /// Speed cap the profile must respect.
+        cap: Speed,
+    },
+}
+
+impl AxisDrive {
+    /// The setpoint as a speed where the axis is velocity-driven, zero otherwise.
+    pub const fn speed(&self) -> Speed {
+        match self {
+            Self::Velocity(v) => *v,
+            _ => Speed::ZERO,
+        }
+    }
+}
+
 /// What the bridge is told to do.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub enum Drive {
-    /// Speed loop active with these wheel setpoints (rad/s).
-    Run {
-        /// Left wheel setpoint.
-        left: Speed,
-        /// Right wheel setpoint.
-        right: Speed,
-    },
-    /// PWM off, low-side switches on: the motors are shorted and brake dynamically.
+pub enum Drive<const N: usize> {
+    /// Each axis driven as its mode says.
+    Run([AxisDrive; N]),
+    /// PWM off, low-side switches on: every motor shorted, braking dynamically. The one safe state.
     Brake,
+}
+
+impl<const N: usize> Drive<N> {
+    /// The velocity setpoints of a running drive (zero for axes not velocity-driven), `None` in BRAKE.
+    pub fn speeds(&self) -> Option<[Speed; N]> {
+        match self {
+            Self::Run(axes) => Some(axes.map(|a| a.speed())),
+            Self::Brake => None,
+        }
+    }
 }
 
 /// What the ladder decided after one event: everything the firmware applies and reports.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub struct Output {
+pub struct Output<const N: usize> {
     /// Current rung.
     pub mode: Mode,
     /// Bridge command.
-    pub drive: Drive,
+    pub drive: Drive<N>,
     /// Speed magnitude the current rung allows (rad/s).
     pub limit: Speed,
     /// Fault and status flags for the feedback frame.
@@ -266,23 +451,35 @@ pub struct Output {
 /// defmt renders speeds as raw Q16.16 bits (divide by 65536 for rad/s): `fixed` has no defmt support.
 #[cfg(feature = "defmt")]
 mod defmt_impls {
-    use super::{Drive, Output};
+    use super::{AxisDrive, Drive, Output};
 
-    impl defmt::Format for Drive {
+    impl defmt::Format for AxisDrive {
         fn format(&self, f: defmt::Formatter) {
             match self {
-                Drive::Run { left, right } => defmt::write!(
+                AxisDrive::Coast => defmt::write!(f, "Coast"),
+                AxisDrive::Short => defmt::write!(f, "Short"),
+                AxisDrive::Duty(d) => defmt::write!(f, "Duty({=i32}/65536)", d.to_bits()),
+                AxisDrive::Velocity(v) => defmt::write!(f, "Velocity({=i32}/65536)", v.to_bits()),
+                AxisDrive::Position { target, cap } => defmt::write!(
                     f,
-                    "Run {{ left: {=i32}/65536, right: {=i32}/65536 }}",
-                    left.to_bits(),
-                    right.to_bits()
+                    "Position {{ target: {=i32}/65536, cap: {=i32}/65536 }}",
+                    target.to_bits(),
+                    cap.to_bits()
                 ),
+            }
+        }
+    }
+
+    impl<const N: usize> defmt::Format for Drive<N> {
+        fn format(&self, f: defmt::Formatter) {
+            match self {
+                Drive::Run(axes) => defmt::write!(f, "Run({})", axes),
                 Drive::Brake => defmt::write!(f, "Brake"),
             }
         }
     }
 
-    impl defmt::Format for Output {
+    impl<const N: usize> defmt::Format for Output<N> {
         fn format(&self, f: defmt::Formatter) {
             defmt::write!(
                 f,

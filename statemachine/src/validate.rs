@@ -1,30 +1,51 @@
 //! Command validation: the MCU never trusts a host command (seed 000, "MCU rule").
 //!
 //! The seed's `fabsf(x) > MAX_WHEEL_SPEED` lets NaN through (every comparison with NaN is false);
-//! here a float becomes a [`Speed`] only after it is known to be finite and in range.
+//! here a float becomes a fixed-point target only after it is known to be finite and in its mode's range.
 
 use crate::config::Config;
-use crate::types::{Command, ControlMode, RejectReason, Speed};
+use crate::types::{AxisCommand, AxisMode, Command, Duty, Position, RejectReason, Speed};
 
-/// A command that passed validation: finite, in range, a mode this firmware drives.
+/// One axis of a command that passed validation.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub struct Setpoint {
-    /// Left wheel target, |left| ≤ v_max.
-    pub left: Speed,
-    /// Right wheel target, |right| ≤ v_max.
-    pub right: Speed,
-    /// [`ControlMode::Idle`] or [`ControlMode::Speed`].
-    pub mode: ControlMode,
+pub struct AxisSetpoint {
+    /// A mode the profile accepts.
+    pub mode: AxisMode,
+    /// |duty| ≤ duty_max, |speed| ≤ v_max, or a position within the travel; zero for the passive modes.
+    pub target: Speed,
+    /// Position speed cap in 0 ..= v_max; zero for the other modes.
+    pub cap: Speed,
+}
+
+impl AxisSetpoint {
+    /// A passive axis (coast or short brake).
+    pub const fn passive(mode: AxisMode) -> Self {
+        Self {
+            mode,
+            target: Speed::ZERO,
+            cap: Speed::ZERO,
+        }
+    }
+}
+
+/// A command that passed validation: finite, in range, modes the profile accepts.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Setpoint<const N: usize> {
+    /// One validated request per axis.
+    pub axes: [AxisSetpoint; N],
     /// Drive enabled.
     pub enable: bool,
     /// Sequence number, where the link carries one.
     pub seq: Option<u32>,
+    /// The comm-loss threshold this frame leaves in force: its `timeout` capped by the profile's
+    /// `brake_after`, at least 1.
+    pub brake_after: u16,
 }
 
-impl Setpoint {
-    /// True if applying this setpoint would turn the wheels (enabled speed mode).
-    pub const fn drives(&self) -> bool {
-        self.enable && matches!(self.mode, ControlMode::Speed)
+impl<const N: usize> Setpoint<N> {
+    /// True if applying this setpoint would put drive torque on axis `i` (enabled, not passive).
+    pub fn drives(&self, i: usize) -> bool {
+        self.enable && self.axes.get(i).is_some_and(|a| !a.mode.is_passive())
     }
 }
 
@@ -36,17 +57,49 @@ pub const fn seq_is_newer(seq: u32, prev: u32) -> bool {
 }
 
 /// SR-4 / INV-5: NaN and infinities are refused before any comparison; the range check is done on the
-/// converted fixed-point value, so rounding cannot carry a value past v_max.
-fn to_speed(x: f32, cfg: &Config) -> Result<Speed, RejectReason> {
+/// converted fixed-point value, so rounding cannot carry a value past a limit.
+fn to_q(x: f32, lo: Speed, hi: Speed) -> Result<Speed, RejectReason> {
     if !x.is_finite() {
         return Err(RejectReason::NonFinite);
     }
-    let v_max = cfg.params().v_max;
     match q16_from_f32(x) {
-        Some(s) if s <= v_max && s >= v_max.saturating_neg() => Ok(s),
+        Some(s) if s <= hi && s >= lo => Ok(s),
         _ => Err(RejectReason::OutOfRange),
     }
 }
+
+/// One axis: its mode accepted by the profile, its numbers finite and within the mode's range.
+fn validate_axis(a: &AxisCommand, cfg: &Config) -> Result<AxisSetpoint, RejectReason> {
+    let p = cfg.params();
+    if !p.modes.contains(a.mode) {
+        return Err(RejectReason::UnsupportedMode);
+    }
+    let sym = |limit: Speed| (limit.saturating_neg(), limit);
+    let (target, cap) = match a.mode {
+        AxisMode::Coast | AxisMode::Short => (Speed::ZERO, Speed::ZERO),
+        AxisMode::Duty => {
+            let (lo, hi) = sym(p.duty_max);
+            (to_q(a.target, lo, hi)?, Speed::ZERO)
+        }
+        AxisMode::Velocity => {
+            let (lo, hi) = sym(p.v_max);
+            (to_q(a.target, lo, hi)?, Speed::ZERO)
+        }
+        // SR-15 / INV-15: a position target outside the travel is refused, so none is ever applied.
+        AxisMode::Position => (
+            to_q(a.target, p.travel_lo, p.travel_hi)?,
+            to_q(a.cap, Speed::ZERO, p.v_max)?,
+        ),
+    };
+    Ok(AxisSetpoint {
+        mode: a.mode,
+        target,
+        cap,
+    })
+}
+
+/// The type of [`Position`] and [`Duty`] targets is [`Speed`]'s (Q16.16); the aliases name the unit.
+const _: (Position, Duty) = (Speed::ZERO, Speed::ZERO);
 
 /// A finite `f32` as Q16.16, rounded to the nearest step with ties to even (what
 /// `Speed::checked_from_num` does), or `None` if |x| ≥ 2¹⁵ (the one in-range value this refuses,
@@ -102,24 +155,27 @@ fn within(a: Speed, b: Speed, allowance: Speed) -> bool {
 
 /// Checks `cmd` against the configuration and the last valid setpoint.
 ///
-/// `allowance` is how far a driving command may move from the last valid driving one
-/// (the ladder passes `max_cmd_step` × ticks since that frame, so lost frames do not lock the host out).
-/// Checks in order: finite, in range, known mode, driven mode, newer sequence, acceleration.
-/// Frames that do not drive (disabled or idle) skip the acceleration check: stopping is always allowed.
-pub fn validate(
-    cmd: &Command,
-    last: Option<&Setpoint>,
+/// `allowance` is how far a velocity target may move from the last valid one on the same axis (the
+/// ladder passes `max_cmd_step` × ticks since that frame, so lost frames do not lock the host out).
+/// Checks in order: each axis (mode accepted, finite, in range), timeout, newer sequence, acceleration.
+/// Frames that stop (disabled, or a zero or passive target) skip the acceleration check: stopping is
+/// always allowed.
+pub fn validate<const N: usize>(
+    cmd: &Command<N>,
+    last: Option<&Setpoint<N>>,
     allowance: Speed,
     cfg: &Config,
-) -> Result<Setpoint, RejectReason> {
-    let left = to_speed(cmd.left, cfg)?;
-    let right = to_speed(cmd.right, cfg)?;
-    let mode = match ControlMode::from_raw(cmd.mode) {
-        None => return Err(RejectReason::UnknownMode),
-        Some(ControlMode::Position | ControlMode::RawDuty) => {
-            return Err(RejectReason::UnsupportedMode)
-        }
-        Some(m) => m,
+) -> Result<Setpoint<N>, RejectReason> {
+    let mut axes = [AxisSetpoint::passive(AxisMode::Coast); N];
+    for (out, a) in axes.iter_mut().zip(cmd.axes.iter()) {
+        *out = validate_axis(a, cfg)?;
+    }
+    let brake_max = cfg.params().brake_after;
+    let brake_after = match cmd.timeout {
+        None => brake_max,
+        Some(0) => return Err(RejectReason::OutOfRange),
+        Some(t) if t < brake_max => t,
+        Some(_) => brake_max,
     };
     if let (
         Some(seq),
@@ -134,19 +190,23 @@ pub fn validate(
         }
     }
     let sp = Setpoint {
-        left,
-        right,
-        mode,
+        axes,
         enable: cmd.enable,
         seq: cmd.seq,
+        brake_after,
     };
     if let Some(prev) = last {
-        if sp.drives()
-            && prev.drives()
-            && !(within(left, prev.left, allowance) && within(right, prev.right, allowance))
-        {
-            // SR-4: an impossible jump is refused (Incident-A: a corrupted frame that passes the CRC).
-            return Err(RejectReason::Acceleration);
+        for (i, (a, b)) in sp.axes.iter().zip(prev.axes.iter()).enumerate() {
+            let both_velocity = a.mode == AxisMode::Velocity && b.mode == AxisMode::Velocity;
+            if both_velocity
+                && sp.drives(i)
+                && prev.drives(i)
+                && a.target != Speed::ZERO
+                && !within(a.target, b.target, allowance)
+            {
+                // SR-4: an impossible jump is refused (Incident-A: a corrupted frame that passes the CRC).
+                return Err(RejectReason::Acceleration);
+            }
         }
     }
     Ok(sp)
@@ -155,6 +215,7 @@ pub fn validate(
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::types::AxisCommand;
 
     /// The bit-level conversion agrees with `fixed`'s `checked_from_num` (limited to |x| < 2^15) for
     /// every exponent, with mantissas at and around every rounding boundary and pseudo-random ones.
@@ -201,14 +262,8 @@ mod tests {
         assert!(n > 1_000_000);
     }
 
-    fn cmd(left: f32, right: f32) -> Command {
-        Command {
-            left,
-            right,
-            mode: 1,
-            enable: true,
-            seq: None,
-        }
+    fn cmd(left: f32, right: f32) -> Command<2> {
+        Command::velocity([left, right], true, None)
     }
 
     const STEP: Speed = Speed::from_bits(3277);
@@ -243,28 +298,93 @@ mod tests {
     }
 
     #[test]
-    fn modes() {
-        let c = Config::DEFAULT;
-        for (raw, want) in [
-            (0, Ok(ControlMode::Idle)),
-            (1, Ok(ControlMode::Speed)),
-            (2, Err(RejectReason::UnsupportedMode)),
-            (3, Err(RejectReason::UnsupportedMode)),
-            (4, Err(RejectReason::UnknownMode)),
-            (u32::MAX, Err(RejectReason::UnknownMode)),
-        ] {
-            let r = validate(
-                &Command {
-                    mode: raw,
-                    ..cmd(0.0, 0.0)
+    fn each_profile_accepts_its_modes_only() {
+        let one = |m: AxisMode| {
+            Command::<2>::uniform(
+                AxisCommand {
+                    mode: m,
+                    target: 0.5,
+                    cap: 1.0,
                 },
+                true,
                 None,
-                STEP,
-                &c,
             )
-            .map(|s| s.mode);
-            assert_eq!(r, want, "mode {raw}");
+        };
+        let table: [(Config, [bool; 5]); 4] = [
+            // coast, short, duty, velocity, position
+            (Config::AMR_SPI, [false, false, false, true, false]),
+            (Config::CDC, [true, false, true, false, false]),
+            (Config::TEENSY, [true, false, false, false, true]),
+            (Config::PI_SPI, [true, true, true, true, true]),
+        ];
+        for (cfg, accepts) in table {
+            for (m, ok) in AxisMode::ALL.into_iter().zip(accepts) {
+                let r = validate(&one(m), None, STEP, &cfg);
+                if ok {
+                    assert!(r.is_ok(), "{m:?} in {:?}", cfg.params().modes);
+                } else {
+                    assert_eq!(r, Err(RejectReason::UnsupportedMode), "{m:?}");
+                }
+            }
         }
+    }
+
+    #[test]
+    fn duty_position_and_timeout_ranges() {
+        let c = Config::PI_SPI;
+        let p = c.params();
+        let duty = |d: f32| Command::<2>::uniform(AxisCommand::duty(d), true, None);
+        assert!(validate(&duty(1.0), None, STEP, &c).is_ok());
+        assert!(validate(&duty(-1.0), None, STEP, &c).is_ok());
+        assert_eq!(
+            validate(&duty(1.0001), None, STEP, &c),
+            Err(RejectReason::OutOfRange)
+        );
+        assert_eq!(
+            validate(&duty(f32::NAN), None, STEP, &c),
+            Err(RejectReason::NonFinite)
+        );
+        // Travel ±100 rad, caps 0 ..= v_max (20 rad/s).
+        let pos =
+            |t: f32, cap: f32| Command::<2>::uniform(AxisCommand::position(t, cap), true, None);
+        assert!(validate(&pos(100.0, 20.0), None, STEP, &c).is_ok());
+        assert!(validate(&pos(-100.0, 0.0), None, STEP, &c).is_ok());
+        assert_eq!(
+            validate(&pos(100.01, 1.0), None, STEP, &c),
+            Err(RejectReason::OutOfRange)
+        );
+        assert_eq!(
+            validate(&pos(0.0, -0.01), None, STEP, &c),
+            Err(RejectReason::OutOfRange)
+        );
+        assert_eq!(
+            validate(&pos(0.0, 20.01), None, STEP, &c),
+            Err(RejectReason::OutOfRange)
+        );
+        assert_eq!(
+            validate(&pos(0.0, f32::INFINITY), None, STEP, &c),
+            Err(RejectReason::NonFinite)
+        );
+        // Passive modes ignore their numbers, NaN included.
+        let coast = Command::<2>::uniform(
+            AxisCommand {
+                target: f32::NAN,
+                ..AxisCommand::COAST
+            },
+            true,
+            None,
+        );
+        assert!(validate(&coast, None, STEP, &c).is_ok());
+        // A frame's timeout lowers the threshold, never raises it; zero is refused.
+        let with = |t: Option<u16>| Command {
+            timeout: t,
+            ..duty(0.0)
+        };
+        let th = |t| validate(&with(t), None, STEP, &c).map(|s| s.brake_after);
+        assert_eq!(th(None), Ok(p.brake_after));
+        assert_eq!(th(Some(5)), Ok(5));
+        assert_eq!(th(Some(u16::MAX)), Ok(p.brake_after));
+        assert_eq!(th(Some(0)), Err(RejectReason::OutOfRange));
     }
 
     #[test]
@@ -278,17 +398,18 @@ mod tests {
         );
         // Three ticks since the last valid frame: three steps allowed.
         assert!(validate(&cmd(1.14, 1.0), Some(&last), STEP * 3, &c).is_ok());
-        // Disabling or idling is always allowed.
+        // Disabling or a zero target is always allowed.
         let stop = Command {
             enable: false,
-            ..cmd(0.0, 0.0)
+            ..cmd(5.0, 5.0)
         };
         assert!(validate(&stop, Some(&last), STEP, &c).is_ok());
-        let idle = Command {
-            mode: 0,
-            ..cmd(0.0, 0.0)
-        };
-        assert!(validate(&idle, Some(&last), STEP, &c).is_ok());
+        assert!(validate(&cmd(0.0, 0.0), Some(&last), STEP, &c).is_ok());
+        // A zero on one wheel does not excuse a jump on the other.
+        assert_eq!(
+            validate(&cmd(0.0, 3.0), Some(&last), STEP, &c),
+            Err(RejectReason::Acceleration)
+        );
     }
 
     #[test]

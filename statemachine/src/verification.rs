@@ -1,12 +1,13 @@
 //! Kani harnesses of the ladder invariants (INV-n, `proofs/SAFETY.md`) and their `cargo test` twins.
 //!
-//! Each property is one body generic over [`Source`]: `verify_<property>` runs it under Kani with
-//! symbolic inputs; the `#[test]` of the same name runs it on biased pseudo-random inputs and checks
-//! that every `cover!` fired, so the twin is not vacuous either.
+//! Each property is one body generic over [`Source`] and the axis count `N`: `verify_<property>_<N>`
+//! runs it under Kani with symbolic inputs for N = 2 and N = 4; the `#[test]` of the same name runs it
+//! on biased pseudo-random inputs and checks that every `cover!` fired, so the twin is not vacuous either.
+//! Configurations are any that [`Config::new`] accepts, the four shipped profiles half the time.
 
 use crate::harness::{arbitrary, Source};
-use crate::ladder::{Estop, Event, Ladder, LATCHING};
-use crate::types::{Drive, FaultFlags, Mode, RejectReason, Speed};
+use crate::ladder::{Estop, Event, Ladder, Source as Origin, LATCHING};
+use crate::types::{AxisDrive, AxisMode, Drive, FaultFlags, Mode, RejectReason, Speed};
 use crate::validate::validate;
 use crate::{assume, cover, Config};
 
@@ -14,7 +15,7 @@ fn magnitude(s: Speed) -> Speed {
     s.saturating_abs()
 }
 
-fn valid_ladder(src: &mut impl Source) -> Option<Ladder> {
+fn valid_ladder<const N: usize>(src: &mut impl Source) -> Option<Ladder<N>> {
     let cfg = arbitrary::config(src)?;
     let l = arbitrary::ladder(src, cfg);
     if l.is_valid() {
@@ -25,33 +26,46 @@ fn valid_ladder(src: &mut impl Source) -> Option<Ladder> {
 }
 
 /// INV-0 (base): the power-on state satisfies the invariant and is braked.
-pub fn initial_state_is_valid(src: &mut impl Source) {
+pub fn initial_state_is_valid<const N: usize>(src: &mut impl Source) {
     let cfg = arbitrary::config(src);
     assume!(src, cfg.is_some());
     let Some(cfg) = cfg else { return };
-    let mut l = Ladder::new(cfg);
-    assert!(l.is_valid());
-    assert_eq!(l.output().drive, Drive::Brake);
-    assert!(l.output().faults.contains(FaultFlags::POWER_ON));
-    cover!(src, cfg != Config::DEFAULT, "a non-default configuration");
+    let mut l = Ladder::<N>::new(cfg);
+    assert!(l.is_valid(), "INV-0: the power-on state is valid");
+    assert!(
+        l.output().drive == Drive::Brake,
+        "INV-0: the power-on state is BRAKE"
+    );
+    assert!(
+        l.output().faults.contains(FaultFlags::POWER_ON),
+        "INV-0: the power-on state reports POWER_ON"
+    );
+    cover!(
+        src,
+        !Config::PROFILES.contains(&cfg),
+        "a configuration other than the profiles"
+    );
     let out = l.step(Event::Tick);
-    assert_eq!(out.drive, Drive::Brake);
+    assert!(out.drive == Drive::Brake, "INV-0: ticks alone never arm");
 }
 
 /// INV-0 (step), INV-2, INV-9: every event from every valid state keeps the invariant, never panics
 /// or overflows, and a late link is never NORMAL or REDUCED.
-pub fn step_preserves_invariant(src: &mut impl Source) {
-    let l0 = valid_ladder(src);
+pub fn step_preserves_invariant<const N: usize>(src: &mut impl Source) {
+    let l0 = valid_ladder::<N>(src);
     assume!(src, l0.is_some());
     let Some(l0) = l0 else { return };
     let e = arbitrary::event(src);
     let mut l = l0;
     let out = l.step(e);
-    assert!(l.is_valid());
-    assert_eq!(out, l.output());
+    assert!(l.is_valid(), "INV-0: step preserves the invariant");
+    assert!(out == l.output(), "step returns the state's output");
     let p = l.config().params();
     if out.age >= p.hold_after {
-        assert!(!matches!(out.mode, Mode::Normal | Mode::Reduced));
+        assert!(
+            !matches!(out.mode, Mode::Normal | Mode::Reduced),
+            "INV-2: a late link is never NORMAL or REDUCED"
+        );
     }
     cover!(
         src,
@@ -88,19 +102,24 @@ pub fn step_preserves_invariant(src: &mut impl Source) {
         matches!(e, Event::Frame(_)) && l.counters().valid_frames != l0.counters().valid_frames,
         "valid frame"
     );
+    cover!(
+        src,
+        l.axis_modes() != l0.axis_modes() && out.mode != Mode::Brake,
+        "an axis changes mode"
+    );
 }
 
-/// INV-1: with no valid frame, BRAKE is reached at the `brake_after`-th tick (≤ 10) from any valid
-/// state, whatever else happens between the ticks.
-pub fn comm_loss_brakes_within_brake_after_ticks(src: &mut impl Source) {
-    let l0 = valid_ladder(src);
+/// INV-1 (unrolled, thresholds ≤ 9): with no valid frame, BRAKE is reached at the threshold in force
+/// from any valid state, whatever else happens between the ticks.
+pub fn comm_loss_brakes_within_brake_after_ticks<const N: usize>(src: &mut impl Source) {
+    let l0 = valid_ladder::<N>(src);
     assume!(src, l0.is_some());
     let Some(mut l) = l0 else { return };
     let start = l.mode();
-    let brake_after = l.config().params().brake_after;
-    assert!(brake_after <= crate::config::MAX_BRAKE_AFTER);
+    let brake_after = l.brake_after();
+    assume!(src, brake_after <= crate::config::MAX_BRAKE_AFTER_1KHZ);
     let mut braked_at = None;
-    for k in 1..=crate::config::MAX_BRAKE_AFTER {
+    for k in 1..=crate::config::MAX_BRAKE_AFTER_1KHZ {
         if k > brake_after {
             break;
         }
@@ -112,8 +131,10 @@ pub fn comm_loss_brakes_within_brake_after_ticks(src: &mut impl Source) {
             braked_at = Some(k);
         }
         if k == brake_after {
-            assert_eq!(out.mode, Mode::Brake);
-            assert_eq!(out.drive, Drive::Brake);
+            assert!(
+                out.mode == Mode::Brake && out.drive == Drive::Brake,
+                "INV-1: comm loss brakes at the threshold"
+            );
         }
     }
     cover!(src, start == Mode::Normal, "from NORMAL");
@@ -127,9 +148,71 @@ pub fn comm_loss_brakes_within_brake_after_ticks(src: &mut impl Source) {
     );
 }
 
-/// INV-3: the applied speed stays within ±v_max, and above the rung's limit only while falling.
-pub fn applied_speed_within_mode_limit(src: &mut impl Source) {
-    let l0 = valid_ladder(src);
+/// INV-18 (the induction step of INV-1 for every profile): an event that is not a valid frame never
+/// lowers the age, never raises the threshold in force, and a tick adds exactly one to the age; at
+/// the threshold the drive is BRAKE. With INV-0's clause "unlatched ⇒ age < threshold ≤ the
+/// profile's `brake_after`", BRAKE comes at the latest at the `brake_after`-th tick after the last
+/// valid frame, for every profile (SAFETY.md §4, the induction argument).
+pub fn comm_loss_age_advances<const N: usize>(src: &mut impl Source) {
+    let l0 = valid_ladder::<N>(src);
+    assume!(src, l0.is_some());
+    let Some(l0) = l0 else { return };
+    let e = if src.bool() {
+        Event::Tick
+    } else {
+        arbitrary::event_without_valid_frame(src)
+    };
+    let mut l = l0;
+    let out = l.step(e);
+    assert!(
+        l.brake_after() <= l0.brake_after()
+            || l.counters().valid_frames != l0.counters().valid_frames,
+        "INV-18: only a valid frame changes the threshold"
+    );
+    assert!(
+        l.brake_after() <= l.config().params().brake_after,
+        "INV-18: the threshold never exceeds the profile's brake_after"
+    );
+    assert!(
+        l.counters().valid_frames == l0.counters().valid_frames,
+        "INV-18: an event without a valid frame validates nothing"
+    );
+    if e == Event::Tick {
+        assert!(
+            l.age() == l0.age().saturating_add(1),
+            "INV-18: a tick adds one to the age"
+        );
+        if l.age() >= l.brake_after() {
+            assert!(
+                out.drive == Drive::Brake,
+                "INV-18: at the threshold the drive is BRAKE"
+            );
+        }
+    } else {
+        assert!(l.age() == l0.age(), "INV-18: only ticks move the age");
+    }
+    cover!(
+        src,
+        e == Event::Tick && l0.mode != Mode::Brake && out.mode == Mode::Brake,
+        "a tick reaches the threshold"
+    );
+    cover!(
+        src,
+        l0.brake_after() > crate::config::MAX_BRAKE_AFTER_1KHZ && l0.mode != Mode::Brake,
+        "a long threshold (50 Hz profile)"
+    );
+    cover!(
+        src,
+        l0.brake_after() < l.config().params().brake_after && l0.mode != Mode::Brake,
+        "a frame's own timeout in force"
+    );
+}
+
+/// INV-3, INV-16: velocity and position caps stay within v_max, duties within duty_max; above the
+/// rung's limit only while falling; in HOLD and STOP every value falls toward zero without changing
+/// sign; in BRAKE every value is zero.
+pub fn applied_within_mode_limit<const N: usize>(src: &mut impl Source) {
+    let l0 = valid_ladder::<N>(src);
     assume!(src, l0.is_some());
     let Some(l0) = l0 else { return };
     let mut l = l0;
@@ -141,41 +224,65 @@ pub fn applied_speed_within_mode_limit(src: &mut impl Source) {
     let out = l.step(e);
     let p = *l.config().params();
     let ticked = e == Event::Tick;
-    for (a0, a1) in l0.applied().into_iter().zip(l.applied()) {
+    let modes = l.axis_modes();
+    for ((a0, a1), m) in l0.applied().into_iter().zip(l.applied()).zip(modes) {
         let (m0, m1) = (magnitude(a0), magnitude(a1));
-        assert!(m1 <= p.v_max);
+        let (full, reduced) = if m == AxisMode::Duty {
+            (p.duty_max, p.duty_reduced)
+        } else {
+            (p.v_max, p.reduced_limit)
+        };
+        assert!(
+            m1 <= full,
+            "INV-3/INV-16: |applied| within the mode's limit"
+        );
         match out.mode {
             Mode::Normal => {}
             // Ramping down toward the reduced limit; between ticks the setpoint does not move.
-            Mode::Reduced => assert!(m1 <= p.reduced_limit || m1 < m0 || (!ticked && m1 == m0)),
+            Mode::Reduced => assert!(
+                m1 <= reduced || m1 < m0 || (!ticked && m1 == m0),
+                "INV-3/INV-16: REDUCED above its limit only while falling"
+            ),
             Mode::Hold | Mode::Stop => {
-                assert!(m1 <= m0);
-                assert!(a1 == Speed::ZERO || (a1 > Speed::ZERO) == (a0 > Speed::ZERO));
+                assert!(m1 <= m0, "INV-3: HOLD and STOP never speed up");
+                assert!(
+                    a1 == Speed::ZERO || (a1 > Speed::ZERO) == (a0 > Speed::ZERO),
+                    "INV-3: HOLD and STOP never reverse"
+                );
             }
-            Mode::Brake => assert_eq!(a1, Speed::ZERO),
+            Mode::Brake => assert!(a1 == Speed::ZERO, "INV-3: BRAKE applies nothing"),
         }
     }
+    let any =
+        |f: &dyn Fn(AxisMode, Speed) -> bool| modes.iter().zip(l.applied()).any(|(m, a)| f(*m, a));
     cover!(
         src,
-        out.mode == Mode::Reduced && magnitude(l.applied()[0]) > p.reduced_limit,
-        "REDUCED while ramping down"
+        out.mode == Mode::Reduced
+            && any(&|m, a| m == AxisMode::Velocity && magnitude(a) > p.reduced_limit),
+        "REDUCED while ramping a speed down"
     );
     cover!(
         src,
-        out.mode == Mode::Stop && l.applied()[0] != Speed::ZERO,
+        out.mode == Mode::Stop && any(&|m, a| m == AxisMode::Velocity && a != Speed::ZERO),
         "STOP while moving"
     );
     cover!(
         src,
-        out.mode == Mode::Normal && magnitude(l.applied()[0]) > p.reduced_limit,
-        "NORMAL above the reduced limit"
+        out.mode == Mode::Normal
+            && any(&|m, a| m == AxisMode::Duty && magnitude(a) > p.duty_reduced),
+        "NORMAL duty above the reduced duty"
+    );
+    cover!(
+        src,
+        out.mode == Mode::Hold && any(&|m, a| m == AxisMode::Position && a != Speed::ZERO),
+        "HOLD while a position cap falls"
     );
 }
 
 /// INV-4: a refused frame (below the ladder or by validation) leaves the command, the watchdog and the
-/// applied setpoint untouched.
-pub fn rejected_frames_change_nothing_applied(src: &mut impl Source) {
-    let l0 = valid_ladder(src);
+/// applied setpoints untouched.
+pub fn rejected_frames_change_nothing_applied<const N: usize>(src: &mut impl Source) {
+    let l0 = valid_ladder::<N>(src);
     assume!(src, l0.is_some());
     let Some(l0) = l0 else { return };
     let e = if src.bool() {
@@ -188,21 +295,26 @@ pub fn rejected_frames_change_nothing_applied(src: &mut impl Source) {
     let refused = l.counters().rejected_total() != l0.counters().rejected_total()
         || matches!(e, Event::Rejected(_));
     if refused {
-        assert_eq!(l.applied(), l0.applied());
-        assert_eq!(l.last_valid(), l0.last_valid());
-        assert_eq!(l.age(), l0.age());
-        assert_eq!(l.prev_enable, l0.prev_enable);
-        assert_eq!(l.mode(), l0.mode());
-        assert_eq!(out.drive, l0.output().drive);
-        assert_eq!(l.counters().valid_frames, l0.counters().valid_frames);
+        assert!(
+            l.applied() == l0.applied()
+                && l.axis_modes() == l0.axis_modes()
+                && l.last_valid() == l0.last_valid()
+                && l.age() == l0.age()
+                && l.brake_after() == l0.brake_after()
+                && l.prev_enable == l0.prev_enable
+                && l.mode() == l0.mode()
+                && out.drive == l0.output().drive
+                && l.counters().valid_frames == l0.counters().valid_frames,
+            "INV-4: a refused frame changes nothing applied"
+        );
     }
     let grew = |r: RejectReason| l.counters().rejected(r) != l0.counters().rejected(r);
     cover!(src, grew(RejectReason::NonFinite), "refused: non-finite");
     cover!(src, grew(RejectReason::OutOfRange), "refused: out of range");
     cover!(
         src,
-        grew(RejectReason::UnknownMode),
-        "refused: unknown mode"
+        grew(RejectReason::UnsupportedMode),
+        "refused: mode not in the profile"
     );
     cover!(
         src,
@@ -218,77 +330,163 @@ pub fn rejected_frames_change_nothing_applied(src: &mut impl Source) {
     );
 }
 
-/// INV-5: validation never lets a NaN or infinity through, and what it accepts is in range and equals
-/// the sent value to within the Q16.16 rounding.
-pub fn validated_setpoints_are_finite_and_in_range(src: &mut impl Source) {
+/// INV-5, INV-15: validation never lets a NaN or infinity through; what it accepts is within its
+/// mode's range (±v_max, ±duty_max, a position within the travel, a cap within 0 ..= v_max), in a mode
+/// the profile accepts, and equals the sent value to within the Q16.16 rounding.
+pub fn validated_setpoints_are_finite_and_in_range<const N: usize>(src: &mut impl Source) {
     let cfg = arbitrary::config(src);
     assume!(src, cfg.is_some());
     let Some(cfg) = cfg else { return };
-    let cmd = arbitrary::command(src);
+    let cmd = arbitrary::command::<N>(src);
     let last = if src.bool() {
         Some(arbitrary::setpoint(src, &cfg))
     } else {
         None
     };
-    let allowance = src.speed_within(cfg.params().v_max);
+    let p = *cfg.params();
+    let allowance = src.speed_within(p.v_max);
     let r = validate(&cmd, last.as_ref(), allowance, &cfg);
-    let v = cfg.params().v_max;
     let half_lsb = 1.0 / 131_072.0;
+    let close = |s: Speed, x: f32| {
+        let err = s.to_num::<f64>() - f64::from(x);
+        (-half_lsb..=half_lsb).contains(&err)
+    };
+    let within = |s: Speed, lo: Speed, hi: Speed| s >= lo && s <= hi;
     if let Ok(sp) = r {
-        assert!(cmd.left.is_finite() && cmd.right.is_finite());
-        for (s, x) in [(sp.left, cmd.left), (sp.right, cmd.right)] {
-            assert!(s <= v && s >= -v);
-            let err = s.to_num::<f64>() - f64::from(x);
-            assert!((-half_lsb..=half_lsb).contains(&err));
+        for (a, c) in sp.axes.iter().zip(cmd.axes.iter()) {
+            assert!(a.mode == c.mode, "INV-5: the mode is the one sent");
+            assert!(
+                p.modes.contains(a.mode),
+                "INV-5: only the profile's modes are accepted"
+            );
+            let ok = match a.mode {
+                AxisMode::Coast | AxisMode::Short => {
+                    a.target == Speed::ZERO && a.cap == Speed::ZERO
+                }
+                AxisMode::Duty => {
+                    c.target.is_finite()
+                        && within(a.target, -p.duty_max, p.duty_max)
+                        && close(a.target, c.target)
+                }
+                AxisMode::Velocity => {
+                    c.target.is_finite()
+                        && within(a.target, -p.v_max, p.v_max)
+                        && close(a.target, c.target)
+                }
+                AxisMode::Position => {
+                    c.target.is_finite()
+                        && c.cap.is_finite()
+                        && within(a.target, p.travel_lo, p.travel_hi)
+                        && within(a.cap, Speed::ZERO, p.v_max)
+                        && close(a.target, c.target)
+                        && close(a.cap, c.cap)
+                }
+            };
+            assert!(
+                ok,
+                "INV-5/INV-15: an accepted target is finite, in its mode's range and as sent"
+            );
         }
+        assert!(
+            sp.brake_after >= 1 && sp.brake_after <= p.brake_after,
+            "INV-18: a frame's threshold is 1 ..= the profile's brake_after"
+        );
     }
-    if cmd.left.is_nan() || cmd.right.is_infinite() {
-        assert!(r.is_err());
+    let first = cmd.axes.first().copied();
+    let nan_driving = first.is_some_and(|a| !a.mode.is_passive() && a.target.is_nan());
+    if nan_driving {
+        assert!(r.is_err(), "INV-5: a NaN target is always refused");
     }
     cover!(
         src,
-        r.is_ok() && cmd.left < 0.0,
+        r.is_ok() && first.is_some_and(|a| a.mode == AxisMode::Velocity && a.target < 0.0),
         "accepted a negative speed"
     );
     cover!(
         src,
-        r.is_ok() && sp_at_limit(&r, v),
-        "accepted exactly v_max"
+        matches!(r, Ok(sp) if sp.axes.first().is_some_and(|a| a.mode == AxisMode::Position && a.cap > Speed::ZERO)),
+        "accepted a position target under a cap"
     );
     cover!(
         src,
-        cmd.left.is_nan() && r == Err(RejectReason::NonFinite),
+        nan_driving && r == Err(RejectReason::NonFinite),
         "refused NaN"
+    );
+    cover!(
+        src,
+        first.is_some_and(|a| a.mode == AxisMode::Position) && r == Err(RejectReason::OutOfRange),
+        "refused a position beyond the travel"
     );
 }
 
-fn sp_at_limit(r: &Result<crate::Setpoint, RejectReason>, v: Speed) -> bool {
-    matches!(r, Ok(sp) if sp.left == v || sp.left == -v)
-}
-
-/// INV-6: BRAKE is left only at a tick, after an explicit re-arm (a `Rearm` event or an enable 0→1
-/// edge), with a fresh valid frame and no latching cause active; ESTOP is cleared only by `Release`.
-pub fn brake_left_only_by_rearm_and_fresh_frames(src: &mut impl Source) {
-    let l0 = valid_ladder(src);
+/// INV-6, INV-14: BRAKE is left only at a tick, after an explicit re-arm (a `Rearm` event or an
+/// enable 0→1 edge), with a fresh valid frame and no latching cause active. ESTOP belongs to the
+/// sources that engaged it: it is released only by one of them or by the local input, never by
+/// another link; after an ESTOP latch a re-arm counts only from the source that released it.
+pub fn brake_left_only_by_rearm_and_fresh_frames<const N: usize>(src: &mut impl Source) {
+    let l0 = valid_ladder::<N>(src);
     assume!(src, l0.is_some());
     let Some(l0) = l0 else { return };
     let e = arbitrary::event(src);
     let mut l = l0;
     l.step(e);
     if l0.brake_latched() && !l.brake_latched() {
-        assert_eq!(e, Event::Tick);
-        // The re-arm was pending and a valid frame came after the previous tick.
-        assert!(l0.rearm_pending && l0.age() == 0);
-        assert!(!l0.active.intersects(LATCHING));
-        assert!(matches!(l.last_valid(), Some(sp) if sp.enable));
+        assert!(e == Event::Tick, "INV-6: BRAKE is left only at a tick");
+        assert!(
+            l0.rearm_pending && l0.age() == 0,
+            "INV-6: BRAKE is left only with a re-arm and a fresh frame"
+        );
+        assert!(
+            !l0.active.intersects(LATCHING),
+            "INV-6: BRAKE is left only with no latching cause"
+        );
+        assert!(
+            matches!(l.last_valid(), Some(sp) if sp.enable),
+            "INV-6: BRAKE is left only for an enabled command"
+        );
     }
+    let edge = matches!(e, Event::Frame(c) if c.enable) && !l0.prev_enable;
+    let requester = match e {
+        Event::Rearm(s) => Some(s),
+        _ if edge => Some(Origin::Primary),
+        _ => None,
+    };
     if !l0.rearm_pending && l.rearm_pending {
-        let edge = matches!(e, Event::Frame(c) if c.enable) && !l0.prev_enable;
-        assert!(e == Event::Rearm || edge);
+        assert!(
+            requester.is_some(),
+            "INV-6: a re-arm is pending only by a request"
+        );
+        if l0.latch_causes.contains(FaultFlags::ESTOP) {
+            assert!(
+                l0.estop_released_by == Some(Origin::Local) || l0.estop_released_by == requester,
+                "INV-14: after ESTOP only the releasing source re-arms"
+            );
+        }
     }
-    if l0.active.contains(FaultFlags::ESTOP) && e != Event::Estop(Estop::Release) {
-        assert!(l.active.contains(FaultFlags::ESTOP));
-        assert!(l.brake_latched());
+    // Every source that held ESTOP still holds it, unless it released or the local input did.
+    for s in Origin::ALL {
+        let released = matches!(e, Event::Estop { source, action: Estop::Release } if source == s || source == Origin::Local);
+        if l0.estop_owners() & s.bit() != 0 && !released {
+            assert!(
+                l.estop_owners() & s.bit() != 0,
+                "INV-14: ESTOP is released only by its owner or the local input"
+            );
+        }
+    }
+    if l0.active.contains(FaultFlags::ESTOP) {
+        assert!(l.brake_latched(), "INV-6: ESTOP keeps BRAKE latched");
+        if !matches!(
+            e,
+            Event::Estop {
+                action: Estop::Release,
+                ..
+            }
+        ) {
+            assert!(
+                l.active.contains(FaultFlags::ESTOP),
+                "INV-6: the ESTOP flag is cleared only by a release"
+            );
+        }
     }
     cover!(
         src,
@@ -297,7 +495,7 @@ pub fn brake_left_only_by_rearm_and_fresh_frames(src: &mut impl Source) {
     );
     cover!(
         src,
-        !l0.rearm_pending && l.rearm_pending && e != Event::Rearm,
+        !l0.rearm_pending && l.rearm_pending && requester == Some(Origin::Primary) && edge,
         "re-arm by enable edge"
     );
     cover!(
@@ -305,12 +503,25 @@ pub fn brake_left_only_by_rearm_and_fresh_frames(src: &mut impl Source) {
         l0.active.contains(FaultFlags::ESTOP) && !l.active.contains(FaultFlags::ESTOP),
         "ESTOP released"
     );
+    cover!(
+        src,
+        l.counters().estop_release_refused != l0.counters().estop_release_refused,
+        "another link's release refused"
+    );
+    cover!(
+        src,
+        l0.latch_causes.contains(FaultFlags::ESTOP)
+            && !l0.active.intersects(LATCHING)
+            && matches!(e, Event::Rearm(_))
+            && !l.rearm_pending,
+        "re-arm by a source that did not release refused"
+    );
 }
 
-/// INV-7: overcurrent, overtemperature, encoder failure, undervoltage, the shutdown bit and ESTOP turn
-/// the PWM off in the same step, from any state.
-pub fn latching_faults_cut_pwm_in_same_step(src: &mut impl Source) {
-    let l0 = valid_ladder(src);
+/// INV-7: overcurrent, overtemperature, encoder failure, undervoltage, the shutdown bit and ESTOP (from
+/// any source) turn the PWM off in the same step, from any state.
+pub fn latching_faults_cut_pwm_in_same_step<const N: usize>(src: &mut impl Source) {
+    let l0 = valid_ladder::<N>(src);
     assume!(src, l0.is_some());
     let Some(mut l) = l0 else { return };
     let e = match src.below(3) {
@@ -323,12 +534,17 @@ pub fn latching_faults_cut_pwm_in_same_step(src: &mut impl Source) {
             }
         }
         1 => Event::Shutdown(true),
-        _ => Event::Estop(Estop::Engage),
+        _ => Event::Estop {
+            source: arbitrary::origin(src),
+            action: Estop::Engage,
+        },
     };
-    let was_running = matches!(l.output().drive, Drive::Run { .. });
+    let was_running = matches!(l.output().drive, Drive::Run(_));
     let out = l.step(e);
-    assert_eq!(out.drive, Drive::Brake);
-    assert_eq!(out.mode, Mode::Brake);
+    assert!(
+        out.drive == Drive::Brake && out.mode == Mode::Brake,
+        "INV-7: a latching fault brakes in the same step"
+    );
     cover!(
         src,
         was_running && matches!(e, Event::Condition { .. }),
@@ -341,14 +557,16 @@ pub fn latching_faults_cut_pwm_in_same_step(src: &mut impl Source) {
     );
     cover!(
         src,
-        was_running && e == Event::Estop(Estop::Engage),
+        was_running && matches!(e, Event::Estop { .. }),
         "ESTOP stops a running drive"
     );
 }
 
-/// INV-8: outside BRAKE the setpoint moves at most `max_tick_step` per tick, and only at a tick.
-pub fn setpoint_step_is_bounded(src: &mut impl Source) {
-    let l0 = valid_ladder(src);
+/// INV-8, INV-19: outside BRAKE, while an axis keeps its mode, its value moves at most
+/// `max_tick_step` (speeds, caps) or `duty_step` (duties) per tick, and only at a tick; an axis
+/// changes mode only from rest or into a passive mode.
+pub fn setpoint_step_is_bounded<const N: usize>(src: &mut impl Source) {
+    let l0 = valid_ladder::<N>(src);
     assume!(src, l0.is_some());
     let Some(l0) = l0 else { return };
     let e = if src.bool() {
@@ -358,14 +576,43 @@ pub fn setpoint_step_is_bounded(src: &mut impl Source) {
     };
     let mut l = l0;
     let out = l.step(e);
+    let p = *l.config().params();
     let bound = l.config().max_tick_step();
     if e != Event::Tick {
-        assert!(l.applied() == l0.applied() || out.mode == Mode::Brake);
+        assert!(
+            l.applied() == l0.applied() || out.mode == Mode::Brake,
+            "INV-8: only ticks move the setpoints"
+        );
+        assert!(
+            l.axis_modes() == l0.axis_modes(),
+            "INV-19: only ticks change an axis's mode"
+        );
     }
     if l0.mode() != Mode::Brake && out.mode != Mode::Brake {
-        for (a0, a1) in l0.applied().into_iter().zip(l.applied()) {
-            let d = a1.saturating_sub(a0);
-            assert!(d <= bound && d >= -bound);
+        for (((a0, a1), m0), m1) in l0
+            .applied()
+            .into_iter()
+            .zip(l.applied())
+            .zip(l0.axis_modes())
+            .zip(l.axis_modes())
+        {
+            if m0 == m1 {
+                let step = if m1 == AxisMode::Duty {
+                    p.duty_step
+                } else {
+                    bound
+                };
+                let d = a1.saturating_sub(a0);
+                assert!(
+                    d <= step && d >= -step,
+                    "INV-8: a setpoint moves at most one step per tick"
+                );
+            } else {
+                assert!(
+                    a0 == Speed::ZERO || m1.is_passive(),
+                    "INV-19: an axis changes mode only from rest or into a passive mode"
+                );
+            }
         }
     }
     cover!(
@@ -376,45 +623,119 @@ pub fn setpoint_step_is_bounded(src: &mut impl Source) {
     cover!(
         src,
         out.mode == Mode::Normal
-            && l.applied()[0].saturating_sub(l0.applied()[0]) == l.config().params().accel_step,
+            && l0.axis_modes().first() == Some(&AxisMode::Velocity)
+            && l.axis_modes().first() == Some(&AxisMode::Velocity)
+            && l.applied()
+                .first()
+                .copied()
+                .unwrap_or(Speed::ZERO)
+                .saturating_sub(l0.applied().first().copied().unwrap_or(Speed::ZERO))
+                == p.accel_step,
         "full acceleration step"
+    );
+    cover!(
+        src,
+        out.mode != Mode::Brake && l.axis_modes() != l0.axis_modes(),
+        "an axis changes mode"
     );
 }
 
+/// INV-17, INV-15: outside BRAKE the drive each axis gets is its mode's: a passive command (coast,
+/// short) never becomes drive, and a position axis's target is within the travel.
+pub fn drive_follows_axis_modes<const N: usize>(src: &mut impl Source) {
+    let l0 = valid_ladder::<N>(src);
+    assume!(src, l0.is_some());
+    let Some(l0) = l0 else { return };
+    let e = if src.bool() {
+        Event::Tick
+    } else {
+        arbitrary::event(src)
+    };
+    let mut l = l0;
+    let out = l.step(e);
+    let p = *l.config().params();
+    if let Drive::Run(axes) = out.drive {
+        let wants = l.last_valid().map(|sp| sp.axes);
+        for (i, (d, m)) in axes.iter().zip(l.axis_modes()).enumerate() {
+            let ok = match (m, d) {
+                (AxisMode::Coast, AxisDrive::Coast) | (AxisMode::Short, AxisDrive::Short) => true,
+                (AxisMode::Duty, AxisDrive::Duty(_))
+                | (AxisMode::Velocity, AxisDrive::Velocity(_)) => true,
+                (AxisMode::Position, AxisDrive::Position { target, cap }) => {
+                    *target >= p.travel_lo && *target <= p.travel_hi && *cap >= Speed::ZERO
+                }
+                _ => false,
+            };
+            assert!(
+                ok,
+                "INV-17/INV-15: each axis is driven in its own mode, positions within the travel"
+            );
+            // After a tick, an axis whose command is passive is driven passively.
+            let want = wants.and_then(|w| w.get(i).copied());
+            if e == Event::Tick {
+                if let Some(w) = want {
+                    if w.mode.is_passive() {
+                        assert!(
+                            matches!(d, AxisDrive::Coast | AxisDrive::Short),
+                            "INV-17: a coast or short request never becomes drive"
+                        );
+                    }
+                }
+            }
+        }
+        cover!(
+            src,
+            axes.iter().any(|d| matches!(d, AxisDrive::Coast)),
+            "an axis coasts while others run"
+        );
+        cover!(
+            src,
+            axes.iter().any(|d| matches!(d, AxisDrive::Position { .. })),
+            "a position axis runs"
+        );
+        cover!(
+            src,
+            axes.iter().any(|d| matches!(d, AxisDrive::Duty(_))),
+            "a duty axis runs"
+        );
+    }
+}
+
 /// INV-1 cross-check on genuinely reachable states: from power-on, after any short event sequence,
-/// ten ticks without a valid frame end in BRAKE.
-pub fn comm_loss_brakes_after_any_prefix(src: &mut impl Source) {
+/// the profile's `brake_after` ticks without a valid frame end in BRAKE (seed 000's profile).
+pub fn comm_loss_brakes_after_any_prefix<const N: usize>(src: &mut impl Source) {
     // Speeds from a short table: this harness is about reachable sequences (arming, ramping, refusals),
     // and concrete speeds keep the solver away from symbolic float conversions; INV-5 covers all floats.
     const SPEEDS: [f32; 4] = [0.0, 0.04, -0.04, 0.5];
-    let mut l = Ladder::new(Config::DEFAULT);
+    let cfg = Config::AMR_SPI;
+    let mut l = Ladder::<N>::new(cfg);
     let mut seen_running = false;
     for _ in 0..5 {
         let e = match src.below(4) {
             0 => Event::Tick,
-            1 => Event::Frame(crate::Command {
-                left: SPEEDS
-                    .get(usize::from(src.below(4)))
-                    .copied()
-                    .unwrap_or(0.0),
-                right: SPEEDS
-                    .get(usize::from(src.below(4)))
-                    .copied()
-                    .unwrap_or(0.0),
-                mode: 1,
-                enable: src.bool(),
-                seq: None,
-            }),
+            1 => {
+                let mut targets = [0.0f32; N];
+                for t in targets.iter_mut() {
+                    *t = SPEEDS
+                        .get(usize::from(src.below(4)))
+                        .copied()
+                        .unwrap_or(0.0);
+                }
+                Event::Frame(crate::Command::velocity(targets, src.bool(), None))
+            }
             2 => Event::Rejected(arbitrary::reason(src)),
-            _ => Event::Rearm,
+            _ => Event::Rearm(Origin::Primary),
         };
         let out = l.step(e);
         seen_running |= matches!(out.mode, Mode::Normal | Mode::Reduced);
     }
-    for _ in 0..10 {
+    for _ in 0..cfg.params().brake_after {
         l.step(Event::Tick);
     }
-    assert_eq!(l.output().drive, Drive::Brake);
+    assert!(
+        l.output().drive == Drive::Brake,
+        "INV-1: comm loss brakes after any reachable prefix"
+    );
     cover!(
         src,
         seen_running,
@@ -422,137 +743,81 @@ pub fn comm_loss_brakes_after_any_prefix(src: &mut impl Source) {
     );
 }
 
+/// One Kani proof per axis count for each body.
+#[cfg(kani)]
+macro_rules! proofs {
+    ($($body:ident => $two:ident, $four:ident;)*) => {
+        $(
+            #[kani::proof]
+            #[kani::unwind(13)]
+            fn $two() {
+                super::$body::<2>(&mut KaniSource);
+            }
+
+            #[kani::proof]
+            #[kani::unwind(13)]
+            fn $four() {
+                super::$body::<4>(&mut KaniSource);
+            }
+        )*
+    };
+}
+
 #[cfg(kani)]
 mod kani_entry {
-    use super::*;
     use crate::harness::KaniSource;
 
-    #[kani::proof]
-    #[kani::unwind(13)]
-    fn verify_initial_state_is_valid() {
-        initial_state_is_valid(&mut KaniSource);
+    proofs! {
+        initial_state_is_valid => verify_initial_state_is_valid_2, verify_initial_state_is_valid_4;
+        step_preserves_invariant => verify_step_preserves_invariant_2, verify_step_preserves_invariant_4;
+        comm_loss_brakes_within_brake_after_ticks => verify_comm_loss_brakes_within_brake_after_ticks_2, verify_comm_loss_brakes_within_brake_after_ticks_4;
+        comm_loss_age_advances => verify_comm_loss_age_advances_2, verify_comm_loss_age_advances_4;
+        applied_within_mode_limit => verify_applied_within_mode_limit_2, verify_applied_within_mode_limit_4;
+        rejected_frames_change_nothing_applied => verify_rejected_frames_change_nothing_applied_2, verify_rejected_frames_change_nothing_applied_4;
+        validated_setpoints_are_finite_and_in_range => verify_validated_setpoints_are_finite_and_in_range_2, verify_validated_setpoints_are_finite_and_in_range_4;
+        brake_left_only_by_rearm_and_fresh_frames => verify_brake_left_only_by_rearm_and_fresh_frames_2, verify_brake_left_only_by_rearm_and_fresh_frames_4;
+        latching_faults_cut_pwm_in_same_step => verify_latching_faults_cut_pwm_in_same_step_2, verify_latching_faults_cut_pwm_in_same_step_4;
+        setpoint_step_is_bounded => verify_setpoint_step_is_bounded_2, verify_setpoint_step_is_bounded_4;
+        drive_follows_axis_modes => verify_drive_follows_axis_modes_2, verify_drive_follows_axis_modes_4;
+        comm_loss_brakes_after_any_prefix => verify_comm_loss_brakes_after_any_prefix_2, verify_comm_loss_brakes_after_any_prefix_4;
     }
+}
 
-    #[kani::proof]
-    #[kani::unwind(13)]
-    fn verify_step_preserves_invariant() {
-        step_preserves_invariant(&mut KaniSource);
-    }
+/// The `cargo test` twin of each body, for N = 2 and N = 4: (seed, cases, cover points).
+macro_rules! twins {
+    ($($body:ident => $seed:expr, $cases:expr, $covers:expr;)*) => {
+        $(
+            mod $body {
+                use crate::harness::Twin;
 
-    #[kani::proof]
-    #[kani::unwind(13)]
-    fn verify_comm_loss_brakes_within_brake_after_ticks() {
-        comm_loss_brakes_within_brake_after_ticks(&mut KaniSource);
-    }
+                #[test]
+                fn two_axes() {
+                    Twin::run($seed, $cases, super::super::$body::<2>).assert_covered($covers);
+                }
 
-    #[kani::proof]
-    #[kani::unwind(13)]
-    fn verify_applied_speed_within_mode_limit() {
-        applied_speed_within_mode_limit(&mut KaniSource);
-    }
-
-    #[kani::proof]
-    #[kani::unwind(13)]
-    fn verify_rejected_frames_change_nothing_applied() {
-        rejected_frames_change_nothing_applied(&mut KaniSource);
-    }
-
-    #[kani::proof]
-    #[kani::unwind(13)]
-    fn verify_validated_setpoints_are_finite_and_in_range() {
-        validated_setpoints_are_finite_and_in_range(&mut KaniSource);
-    }
-
-    #[kani::proof]
-    #[kani::unwind(13)]
-    fn verify_brake_left_only_by_rearm_and_fresh_frames() {
-        brake_left_only_by_rearm_and_fresh_frames(&mut KaniSource);
-    }
-
-    #[kani::proof]
-    #[kani::unwind(13)]
-    fn verify_latching_faults_cut_pwm_in_same_step() {
-        latching_faults_cut_pwm_in_same_step(&mut KaniSource);
-    }
-
-    #[kani::proof]
-    #[kani::unwind(13)]
-    fn verify_setpoint_step_is_bounded() {
-        setpoint_step_is_bounded(&mut KaniSource);
-    }
-
-    #[kani::proof]
-    #[kani::unwind(13)]
-    fn verify_comm_loss_brakes_after_any_prefix() {
-        comm_loss_brakes_after_any_prefix(&mut KaniSource);
-    }
+                #[test]
+                fn four_axes() {
+                    Twin::run($seed ^ 0x40, $cases, super::super::$body::<4>).assert_covered($covers);
+                }
+            }
+        )*
+    };
 }
 
 #[cfg(test)]
 mod twins {
-    use crate::harness::Twin;
-
-    const CASES: u32 = 200_000;
-
-    #[test]
-    fn initial_state_is_valid() {
-        Twin::run(1, 2_000, super::initial_state_is_valid).assert_covered(1);
-    }
-
-    #[test]
-    fn step_preserves_invariant() {
-        Twin::run(2, CASES * 5, super::step_preserves_invariant).assert_covered(7);
-    }
-
-    #[test]
-    fn comm_loss_brakes_within_brake_after_ticks() {
-        Twin::run(3, CASES, |s| {
-            super::comm_loss_brakes_within_brake_after_ticks(s)
-        })
-        .assert_covered(5);
-    }
-
-    #[test]
-    fn applied_speed_within_mode_limit() {
-        Twin::run(4, CASES, super::applied_speed_within_mode_limit).assert_covered(3);
-    }
-
-    #[test]
-    fn rejected_frames_change_nothing_applied() {
-        Twin::run(5, CASES, |s| {
-            super::rejected_frames_change_nothing_applied(s)
-        })
-        .assert_covered(7);
-    }
-
-    #[test]
-    fn validated_setpoints_are_finite_and_in_range() {
-        Twin::run(6, CASES, |s| {
-            super::validated_setpoints_are_finite_and_in_range(s)
-        })
-        .assert_covered(3);
-    }
-
-    #[test]
-    fn brake_left_only_by_rearm_and_fresh_frames() {
-        Twin::run(7, CASES * 5, |s| {
-            super::brake_left_only_by_rearm_and_fresh_frames(s)
-        })
-        .assert_covered(3);
-    }
-
-    #[test]
-    fn latching_faults_cut_pwm_in_same_step() {
-        Twin::run(8, CASES, super::latching_faults_cut_pwm_in_same_step).assert_covered(3);
-    }
-
-    #[test]
-    fn setpoint_step_is_bounded() {
-        Twin::run(9, CASES, super::setpoint_step_is_bounded).assert_covered(2);
-    }
-
-    #[test]
-    fn comm_loss_brakes_after_any_prefix() {
-        Twin::run(10, CASES, super::comm_loss_brakes_after_any_prefix).assert_covered(1);
+    twins! {
+        initial_state_is_valid => 1, 2_000, 1;
+        step_preserves_invariant => 2, 200_000 * 5, 8;
+        comm_loss_brakes_within_brake_after_ticks => 3, 200_000 * 2, 5;
+        comm_loss_age_advances => 11, 200_000 * 2, 3;
+        applied_within_mode_limit => 4, 200_000 * 2, 4;
+        rejected_frames_change_nothing_applied => 5, 200_000, 7;
+        validated_setpoints_are_finite_and_in_range => 6, 200_000, 4;
+        brake_left_only_by_rearm_and_fresh_frames => 7, 200_000 * 10, 5;
+        latching_faults_cut_pwm_in_same_step => 8, 200_000, 3;
+        setpoint_step_is_bounded => 9, 200_000 * 2, 3;
+        drive_follows_axis_modes => 12, 200_000 * 2, 3;
+        comm_loss_brakes_after_any_prefix => 10, 200_000, 1;
     }
 }
