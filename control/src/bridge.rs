@@ -45,10 +45,10 @@ pub enum BridgeState {
     Brake,
 }
 
-/// The bridge state a ladder drive command needs.
-pub const fn bridge_state(drive: &Drive) -> BridgeState {
+/// The bridge state a ladder drive command needs (all axes of one board share the bridge enable).
+pub const fn bridge_state<const N: usize>(drive: &Drive<N>) -> BridgeState {
     match drive {
-        Drive::Run { .. } => BridgeState::Run,
+        Drive::Run(_) => BridgeState::Run,
         Drive::Brake => BridgeState::Brake,
     }
 }

@@ -1,7 +1,7 @@
 #!/usr/bin/env bash
 # Boots the real firmware (feature `qemu`) in QEMU's netduinoplus2 (STM32F405, Cortex-M4), feeds it
 # link frames from a host file through semihosting, and checks its own per-tick trace:
-# frames applied, a corrupted frame rejected without effect, BRAKE at the 10th tick after the link stops;
+# frames applied, a corrupted frame rejected without effect, BRAKE at the 9th tick after the link stops (strictly within 10 ms);
 # and the feedback frames it wrote (feedback.bin): CRC, µs time stamps, sequence, mode and fault flags.
 # Needs qemu-system-arm (Debian: apt-get install qemu-system-arm) and python3.
 set -euo pipefail

@@ -569,9 +569,9 @@ mod tests {
     use statemachine::{Config, Event, Ladder};
 
     /// Drives a real ladder with the bridge's commands (no plant): one command per tick.
-    fn exchange(b: &mut Bridge, l: &mut Ladder, now: u64) -> MotorCommand {
+    fn exchange(b: &mut Bridge, l: &mut Ladder<2>, now: u64) -> MotorCommand {
         let c = b.next_command(now);
-        l.step(Event::Frame(protocol::amr::MotorCommand::to_command(&c)));
+        l.step(protocol::event_from(c.to_command()));
         let out = l.step(Event::Tick);
         let fb = MotorFeedback {
             timestamp_us: now as u32 + 7,
@@ -606,7 +606,14 @@ mod tests {
 
     /// Arms and holds cmd_vel (v, ω) for `cycles` 1 ms cycles against a real ladder; the last
     /// command's wheel speeds.
-    fn settle(b: &mut Bridge, l: &mut Ladder, from: u64, cycles: u64, v: f64, w: f64) -> [f32; 2] {
+    fn settle(
+        b: &mut Bridge,
+        l: &mut Ladder<2>,
+        from: u64,
+        cycles: u64,
+        v: f64,
+        w: f64,
+    ) -> [f32; 2] {
         let mut last = [f32::NAN; 2];
         for k in from..from + cycles {
             b.cmd_vel(k * 1000, v, w);
@@ -700,8 +707,14 @@ mod tests {
         for k in 0..50u64 {
             exchange(&mut b, &mut l, k * 1000);
         }
-        l.step(Event::Estop(statemachine::Estop::Engage));
-        l.step(Event::Estop(statemachine::Estop::Release));
+        l.step(Event::Estop {
+            source: statemachine::Source::Primary,
+            action: statemachine::Estop::Engage,
+        });
+        l.step(Event::Estop {
+            source: statemachine::Source::Primary,
+            action: statemachine::Estop::Release,
+        });
         for k in 50..100u64 {
             exchange(&mut b, &mut l, k * 1000);
         }
@@ -726,9 +739,9 @@ mod tests {
 
     /// The exchange after one that carried an identity request, as the MCU answers it: an
     /// `McuInfo` in the feedback slot, with the feedback sequence number it takes.
-    fn exchange_info(b: &mut Bridge, l: &mut Ladder, now: u64, info: McuInfo) -> MotorCommand {
+    fn exchange_info(b: &mut Bridge, l: &mut Ladder<2>, now: u64, info: McuInfo) -> MotorCommand {
         let c = b.next_command(now);
-        l.step(Event::Frame(c.to_command()));
+        l.step(protocol::event_from(c.to_command()));
         l.step(Event::Tick);
         b.on_frame(now, now + 300, c.seq, Ok(McuFrame::Info(info)));
         c

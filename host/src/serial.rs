@@ -105,7 +105,7 @@ impl<S: ByteStream> CdcLink<S> {
         &mut self,
         msg: cdc::Message,
         timeout: Duration,
-    ) -> Result<(Reply<cdc::Message>, Option<Event>), LinkError> {
+    ) -> Result<(Reply<cdc::Message>, Option<Event<4>>), LinkError> {
         let id = msg.id() as u8;
         let r = self.request(
             &msg,
@@ -121,7 +121,7 @@ impl<S: ByteStream> CdcLink<S> {
         &mut self,
         on: bool,
         timeout: Duration,
-    ) -> Result<(Reply<cdc::Message>, Option<Event>), LinkError> {
+    ) -> Result<(Reply<cdc::Message>, Option<Event<4>>), LinkError> {
         self.command(cdc::Message::MotorEnable(on), timeout)
     }
 
@@ -130,7 +130,7 @@ impl<S: ByteStream> CdcLink<S> {
         &mut self,
         action: Estop,
         timeout: Duration,
-    ) -> Result<(Reply<cdc::Message>, Option<Event>), LinkError> {
+    ) -> Result<(Reply<cdc::Message>, Option<Event<4>>), LinkError> {
         self.command(cdc::Message::Estop(action), timeout)
     }
 }

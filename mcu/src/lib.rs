@@ -55,6 +55,9 @@ pub use statemachine::Speed;
 pub use tick::{Runs, TickInputs, TickOutcome, TickTask};
 pub use tuning::Tuning;
 
+/// The axes of the seed 000 board: two velocity-driven wheels (left, right).
+pub const AXES: usize = 2;
+
 /// Everything the control loops measured, for the feedback frame and the tick's plausibility checks.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub struct Measurements {

@@ -11,11 +11,14 @@
 
 use crate::safety::Safety;
 use crate::Measurements;
+use crate::AXES;
 use protocol::amr::{
     decode_command, encode_feedback, encode_info, McuInfo, MotorCommand, MotorFeedback, FRAME_LEN,
     REQUEST_IDENTITY,
 };
-use statemachine::{Output, RejectReason};
+use statemachine::RejectReason;
+
+type Output = statemachine::Output<AXES>;
 
 /// The link task's own state: the feedback sequence, the last accepted command's sequence, and
 /// the identity it answers with.
@@ -85,7 +88,7 @@ impl LinkTask {
             self.identity_requested = true;
         }
         let before = safety.ladder().counters().valid_frames;
-        let out = safety.step(protocol::event_from(decoded.map(|c| c.to_command())));
+        let out = safety.step(protocol::event_from(decoded.and_then(|c| c.to_command())));
         if safety.ladder().counters().valid_frames != before {
             self.cmd_seq = seq;
         }

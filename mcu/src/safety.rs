@@ -3,7 +3,12 @@
 //! [`Safety::step`], so every mode change, latch and re-arm is recorded whichever task caused it.
 
 use crate::trace::{Record, Trace};
-use statemachine::{Config, Event, FaultFlags, Ladder, Mode, Output};
+use crate::AXES;
+use statemachine::{Config, FaultFlags, Mode};
+
+type Ladder = statemachine::Ladder<AXES>;
+type Event = statemachine::Event<AXES>;
+type Output = statemachine::Output<AXES>;
 
 /// What the trace compares across one ladder step.
 #[derive(Clone, Copy)]

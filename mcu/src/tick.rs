@@ -6,10 +6,11 @@ use crate::hw::Bridge;
 use crate::safety::Safety;
 use crate::tuning::Tuning;
 use crate::Measurements;
+use crate::AXES;
 use control::bridge::bridge_state;
 use control::sense::speed_plausible;
 use control::BridgeState;
-use statemachine::{Condition, Drive, Estop, Event, Output, Speed};
+use statemachine::{Condition, Estop, Event, Output, Source, Speed};
 
 /// How often each control task ran (wrapping counters), for the IWDG liveness check.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
@@ -40,7 +41,7 @@ pub struct TickInputs {
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct TickOutcome {
     /// The ladder's output after the tick.
-    pub out: Output,
+    pub out: Output<AXES>,
     /// The bridge state the output needs.
     pub bridge: BridgeState,
     /// The holding brake is released only while the speed loop drives.
@@ -70,11 +71,8 @@ impl TickOutcome {
     }
 
     /// The setpoints for the speed loop: `None` in BRAKE.
-    pub const fn setpoint(&self) -> Option<[Speed; 2]> {
-        match self.out.drive {
-            Drive::Run { left, right } => Some([left, right]),
-            Drive::Brake => None,
-        }
+    pub fn setpoint(&self) -> Option<[Speed; AXES]> {
+        self.out.drive.speeds()
     }
 }
 
@@ -98,7 +96,10 @@ impl TickTask {
     #[inline(never)]
     pub fn run(&mut self, safety: &mut Safety, inputs: &TickInputs) -> TickOutcome {
         if let Some(e) = inputs.estop {
-            safety.step(Event::Estop(e));
+            safety.step(Event::Estop {
+                source: Source::Local,
+                action: e,
+            });
         }
         let v_max = safety.ladder().config().params().v_max;
         let m = &inputs.meas;

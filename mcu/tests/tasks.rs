@@ -16,7 +16,7 @@ use protocol::amr::{
     decode_feedback, decode_mcu_frame, encode_command, BoardProfile, McuFrame, McuInfo,
     MotorCommand, ResetCause, FRAME_LEN, REQUEST_IDENTITY,
 };
-use statemachine::{Drive, Mode, Speed};
+use statemachine::{Mode, Speed};
 
 const IDENTITY: McuInfo = McuInfo {
     fw_version: 0x0001_0203,
@@ -137,8 +137,8 @@ fn stop_ramp_on_the_board_equals_the_ladders() {
     for _ in 0..9 {
         let o = b.tick();
         b.speed_samples();
-        if let Drive::Run { left, right } = o.out.drive {
-            assert_eq!(b.speed.references(), [left, right], "mode {:?}", o.out.mode);
+        if let Some(setpoint) = o.out.drive.speeds() {
+            assert_eq!(b.speed.references(), setpoint, "mode {:?}", o.out.mode);
             if o.out.mode == Mode::Stop {
                 stop_ticks += 1;
             }

@@ -33,7 +33,10 @@ use mcu::tick::{Runs, TickInputs};
 use mcu::{Bridge, BridgeState, EstopInput, LinkTask, Measurements, Safety, TickTask};
 use protocol::amr::{decode_command, encode_command, MotorCommand, FRAME_LEN};
 use statemachine::harness::{arbitrary, Source};
-use statemachine::{assume, cover, Drive, Estop, Ladder, Mode, RejectReason, Speed};
+use statemachine::{assume, cover, Drive, Estop, Mode, RejectReason, Speed};
+
+/// The seed 000 board's ladder: two velocity-driven wheels.
+type Ladder = statemachine::Ladder<{ mcu::AXES }>;
 
 fn valid_ladder(src: &mut impl Source) -> Option<Ladder> {
     let cfg = arbitrary::config(src)?;
@@ -97,8 +100,9 @@ fn check_delivered_as_sent(src: &mut impl Source, l0: &Ladder, l: &Ladder, cmd: 
             let half = Speed::from_bits(1);
             let sent_l: Speed = Speed::from_num(cmd.left_speed_cmd);
             let sent_r: Speed = Speed::from_num(cmd.right_speed_cmd);
-            assert!(sp.left.saturating_sub(sent_l).saturating_abs() <= half);
-            assert!(sp.right.saturating_sub(sent_r).saturating_abs() <= half);
+            let [left, right] = sp.axes.map(|a| a.target);
+            assert!(left.saturating_sub(sent_l).saturating_abs() <= half);
+            assert!(right.saturating_sub(sent_r).saturating_abs() <= half);
             assert_eq!(sp.enable, cmd.enable);
             assert_eq!(sp.seq, Some(cmd.seq));
         }
@@ -244,7 +248,7 @@ pub fn tick_drives_the_bridge_as_the_ladder_says(src: &mut impl Source) {
     let l0 = valid_ladder(src);
     assume!(src, l0.is_some());
     let Some(l0) = l0 else { return };
-    let brake_after = l0.config().params().brake_after;
+    let brake_after = l0.brake_after();
     let mut safety = Safety::from_ladder(l0);
     let mut tick = TickTask::new(&mcu::tuning::AMR);
     let mut bridge = RecordingBridge::new(src.u16());

@@ -125,7 +125,9 @@ fn run(class: usize, frames: u64, seed: u64) -> Counts {
             continue;
         };
         c.decoded += 1;
-        if validate(&d.to_command(), None, allowance, &cfg).is_ok() {
+        if d.to_command()
+            .is_ok_and(|c| validate(&c, None, allowance, &cfg).is_ok())
+        {
             c.validated += 1;
             if format!("{d:?}") != format!("{cmd:?}") {
                 c.validated_and_different += 1;

@@ -49,7 +49,7 @@
 //! Both messages carry `protocol_version` (must equal [`PROTOCOL_VERSION`]; a frame without it,
 //! e.g. from the original seed-format sender, is refused with [`RejectReason::Version`]) and `seq`.
 //! The Jetson increments the command `seq` for every new command; the MCU passes it to
-//! [`statemachine::validate`], which refuses a repeated or older value (serial-number arithmetic,
+//! [`statemachine::validate()`], which refuses a repeated or older value (serial-number arithmetic,
 //! wrap-around allowed) as [`RejectReason::Stale`], so a frame replayed by a stuck DMA buffer or a
 //! retransmitting bridge never feeds the watchdog. The feedback carries its own `seq` (the host
 //! detects a frozen MCU that keeps sending the same buffer) and `cmd_seq`, the last command the MCU
@@ -76,7 +76,7 @@
 
 use crate::crc16;
 use crate::pb::{self, DecodeError, Reader, Value, Writer};
-use statemachine::{Command, RejectReason};
+use statemachine::{AxisCommand, Command, ControlMode, RejectReason};
 
 /// Bytes per direction per SPI transaction.
 pub const FRAME_LEN: usize = 64;
@@ -588,20 +588,32 @@ pub enum McuFrame {
 
 impl MotorCommand {
     /// The command as the safety core sees it (the ladder validates it); `request` is not part of it.
-    pub fn to_command(&self) -> Command {
-        Command {
-            left: self.left_speed_cmd,
-            right: self.right_speed_cmd,
-            mode: self.control_mode,
+    ///
+    /// `control_mode` maps onto the axes' drive modes: speed → velocity, position → position (no cap:
+    /// the seed's message has none), raw duty → duty; the seed 000 profile accepts velocity only and
+    /// refuses the others. Idle → zero velocity targets (stopping, always allowed); a non-finite speed
+    /// in an idle frame is kept so the ladder still refuses the frame as corrupt. A mode the seed
+    /// does not define is refused here as [`RejectReason::UnknownMode`].
+    pub fn to_command(&self) -> Result<Command<2>, RejectReason> {
+        let mode = ControlMode::from_raw(self.control_mode).ok_or(RejectReason::UnknownMode)?;
+        let axis = |x: f32| match mode {
+            ControlMode::Idle => AxisCommand::velocity(if x.is_finite() { 0.0 } else { x }),
+            ControlMode::Speed => AxisCommand::velocity(x),
+            ControlMode::Position => AxisCommand::position(x, 0.0),
+            ControlMode::RawDuty => AxisCommand::duty(x),
+        };
+        Ok(Command {
+            axes: [axis(self.left_speed_cmd), axis(self.right_speed_cmd)],
             enable: self.enable,
             seq: Some(self.seq),
-        }
+            timeout: None,
+        })
     }
 }
 
 impl MotorFeedback {
     /// Fills the ladder-derived fields from the ladder's output.
-    pub fn with_output(mut self, out: &statemachine::Output) -> Self {
+    pub fn with_output<const N: usize>(mut self, out: &statemachine::Output<N>) -> Self {
         self.fault_flags = u32::from(out.faults.0);
         self.mode = u32::from(out.mode as u8);
         self
@@ -945,8 +957,8 @@ pub fn decode_mcu_frame(frame: &[u8; FRAME_LEN]) -> Result<McuFrame, RejectReaso
 }
 
 /// The ladder event for a received command frame: `Frame(command)` or `Rejected(reason)`.
-pub fn command_event(frame: &[u8; FRAME_LEN]) -> statemachine::Event {
-    crate::event_from(decode_command(frame).map(|c| c.to_command()))
+pub fn command_event(frame: &[u8; FRAME_LEN]) -> statemachine::Event<2> {
+    crate::event_from(decode_command(frame).and_then(|c| c.to_command()))
 }
 
 #[cfg(test)]

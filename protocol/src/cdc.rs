@@ -32,10 +32,10 @@
 //!
 //! | message              | ladder event                                                             |
 //! |----------------------|--------------------------------------------------------------------------|
-//! | `MOTOR_ENABLE` 1     | [`Event::Rearm`] (the explicit re-arm; BRAKE is left only if no latching cause is active) |
-//! | `MOTOR_ENABLE` 0     | [`Event::Frame`] with `enable = false` (STOP: zero target, speed loop on) |
-//! | `ESTOP` 1 / 0        | [`Event::Estop`] `Engage` / `Release`                                   |
-//! | `SET_MOTOR_PWM`      | [`Event::Frame`] in [`ControlMode::RawDuty`]: left = m1/1000, right = m2/1000 (duty fraction). The ladder refuses raw duty ([`RejectReason::UnsupportedMode`]) because it would bypass the speed limits; a board that drives open loop under its own supervision reads [`SetMotorPwm::duty`] instead. |
+//! | `MOTOR_ENABLE` 1     | [`Event::Rearm`] from the primary link (the explicit re-arm; BRAKE is left only if no latching cause is active) |
+//! | `MOTOR_ENABLE` 0     | [`Event::Frame`] with `enable = false`, every motor coasting (the seed: outputs forced to 0) |
+//! | `ESTOP` 1 / 0        | [`Event::Estop`] `Engage` / `Release` from the primary link (it releases only its own ESTOP) |
+//! | `SET_MOTOR_PWM`      | [`Event::Frame`] of four duty axes, `pwm / 1000` of full scale, `pwm = 0` coasting, `timeout_ms` as the frame's comm-loss threshold (see [`SetMotorPwm::to_command`]); the seed 001 profile (`statemachine::Config::CDC`) accepts duty and coast |
 //! | `PING`, MCU→Jetson   | none                                                                     |
 //!
 //! Protocol failures: bad CRC → [`RejectReason::Crc`]; bad SOF → [`RejectReason::Framing`]; wrong
@@ -44,7 +44,8 @@
 
 use crate::crc16;
 use crate::le;
-use statemachine::{Command, ControlMode, Estop, Event, RejectReason};
+use statemachine::config::brake_age_for_timeout_ms;
+use statemachine::{AxisCommand, Command, Estop, Event, RejectReason, Source};
 
 /// Start-of-frame bytes.
 pub const SOF: [u8; 2] = [0xAA, 0x55];
@@ -199,16 +200,24 @@ impl SetMotorPwm {
             .map(|p| p.clamp(PWM_FULL_SCALE.saturating_neg(), PWM_FULL_SCALE))
     }
 
-    /// The ladder's view: a raw-duty command, left = m1, right = m2 as a fraction of full scale.
-    /// The ladder refuses raw duty; see the module documentation.
-    pub fn to_command(&self) -> Command {
-        let [m1, m2, _, _] = self.duty();
+    /// The ladder's view: four duty axes as fractions of full scale (`pwm / 1000`), `pwm = 0` as coast
+    /// (the seed's IN1 = IN2 = 0), and `timeout_ms` as the frame's comm-loss threshold
+    /// ([`brake_age_for_timeout_ms`]: strictly within `timeout_ms`). Nothing is clamped here: a
+    /// `|pwm|` above 1000 reaches the ladder, which refuses the frame as out of range and counts it
+    /// (the seed's `min(…, ARR)` would saturate silently); `timeout_ms = 0` is refused the same way.
+    pub fn to_command(&self) -> Command<4> {
+        let axes = self.pwm.map(|p| {
+            if p == 0 {
+                AxisCommand::COAST
+            } else {
+                AxisCommand::duty(f32::from(p) / f32::from(PWM_FULL_SCALE))
+            }
+        });
         Command {
-            left: f32::from(m1) / f32::from(PWM_FULL_SCALE),
-            right: f32::from(m2) / f32::from(PWM_FULL_SCALE),
-            mode: ControlMode::RawDuty as u32,
+            axes,
             enable: true,
             seq: None,
+            timeout: Some(brake_age_for_timeout_ms(self.timeout_ms).unwrap_or(0)),
         }
     }
 }
@@ -426,17 +435,18 @@ impl Message {
 
     /// The ladder event this message asks for (see the module documentation), `None` for messages
     /// that do not concern the ladder.
-    pub fn to_event(&self) -> Option<Event> {
+    pub fn to_event(&self) -> Option<Event<4>> {
         match self {
-            Self::MotorEnable(true) => Some(Event::Rearm),
-            Self::MotorEnable(false) => Some(Event::Frame(Command {
-                left: 0.0,
-                right: 0.0,
-                mode: ControlMode::Idle as u32,
-                enable: false,
-                seq: None,
-            })),
-            Self::Estop(e) => Some(Event::Estop(*e)),
+            Self::MotorEnable(true) => Some(Event::Rearm(Source::Primary)),
+            Self::MotorEnable(false) => Some(Event::Frame(Command::uniform(
+                AxisCommand::COAST,
+                false,
+                None,
+            ))),
+            Self::Estop(e) => Some(Event::Estop {
+                source: Source::Primary,
+                action: *e,
+            }),
             Self::SetMotorPwm(p) => Some(Event::Frame(p.to_command())),
             Self::Ping | Self::Ack(_) | Self::Imu(_) | Self::Status(_) => None,
         }
@@ -571,7 +581,7 @@ impl StreamDecoder {
 
     /// Returns the next result from bytes already buffered, without new input.
     ///
-    /// Terminates: every [`Scan::Again`] step has dropped one buffered byte.
+    /// Terminates: every `Scan::Again` step has dropped one buffered byte.
     pub fn poll(&mut self) -> Option<Result<Message, Error>> {
         loop {
             if let Scan::Done(r) = self.poll_step() {

@@ -50,7 +50,9 @@ pub mod teensy;
 use statemachine::{Event, RejectReason};
 
 /// The ladder event for a decode result: the command if it decoded, `Rejected(reason)` if not.
-pub fn event_from(result: Result<statemachine::Command, RejectReason>) -> Event {
+pub fn event_from<const N: usize>(
+    result: Result<statemachine::Command<N>, RejectReason>,
+) -> Event<N> {
     match result {
         Ok(cmd) => Event::Frame(cmd),
         Err(reason) => Event::Rejected(reason),

@@ -65,7 +65,10 @@ pub mod assumed;
 
 use crate::le;
 use assumed::{KinematicsConfig, MotorPidSettings, Packed, QuaternionData, SensorData};
-use statemachine::{Command, ControlMode, Event, RejectReason};
+use statemachine::{AxisCommand, Command, Event, RejectReason};
+
+/// Full scale of `motorTarget` in `PWM` mode (the seed: duty 0–399).
+pub const PWM_MAX: u16 = 399;
 
 /// The shared header's `TRANSFER_VERSION`.
 pub const TRANSFER_VERSION: u8 = 15;
@@ -416,35 +419,38 @@ pub struct RxBuffer {
 }
 
 impl RxBuffer {
-    /// The ladder's view of motors 0 (left) and 1 (right); motors 2 and 3 are not wheels of this robot.
-    ///
-    /// Both in `MAV` (velocity PID): [`ControlMode::Speed`], speeds = `motorTarget` × `rad_per_tick`
-    /// (the target is in BEMF ticks per second). Both `OFF` or `PASSIVE_BRAKE`: [`ControlMode::Idle`],
-    /// disabled. `PWM`: raw duty, `MTP`: position (both refused by the ladder). Mixed modes: an
-    /// undefined mode value, refused as [`RejectReason::UnknownMode`]. The motor shutdown bit disables.
-    pub fn to_command(&self, rad_per_tick: f32) -> Command {
-        let [m0, m1, _, _] = self.motor_control_mode;
-        let [t0, t1, _, _] = self.motor_target;
-        let idle = |m: MotorMode| matches!(m, MotorMode::Off | MotorMode::PassiveBrake);
-        let (mode, enable) = match (m0, m1) {
-            (a, b) if idle(a) && idle(b) => (ControlMode::Idle as u32, false),
-            (MotorMode::Mav, MotorMode::Mav) => (ControlMode::Speed as u32, true),
-            (MotorMode::Pwm, MotorMode::Pwm) => (ControlMode::RawDuty as u32, true),
-            (MotorMode::Mtp, MotorMode::Mtp) => (ControlMode::Position as u32, true),
-            _ => (u32::MAX, true),
-        };
-        let scale = |t: i32| if enable { t as f32 * rad_per_tick } else { 0.0 };
+    /// The ladder's view of the four motors, each in its own drive mode: `OFF` → coast,
+    /// `PASSIV_BRAKE` → short brake, `PWM` → duty `motorTarget / 399`, `MAV` → velocity
+    /// `motorTarget × rad_per_tick` (the target is in encoder ticks per second), `MTP` → position
+    /// `motorGoalPosition × rad_per_tick` under the speed cap `|motorTarget| × rad_per_tick`. The motor
+    /// shutdown bit disables (and [`Self::to_events`] sends it first, which brakes).
+    pub fn to_command(&self, rad_per_tick: f32) -> Command<4> {
+        let mut axes = [AxisCommand::COAST; 4];
+        for (((a, m), t), g) in axes
+            .iter_mut()
+            .zip(self.motor_control_mode.iter())
+            .zip(self.motor_target.iter())
+            .zip(self.motor_goal_position.iter())
+        {
+            let (t, g) = (*t as f32, *g as f32);
+            *a = match m {
+                MotorMode::Off => AxisCommand::COAST,
+                MotorMode::PassiveBrake => AxisCommand::SHORT,
+                MotorMode::Pwm => AxisCommand::duty(t / f32::from(PWM_MAX)),
+                MotorMode::Mav => AxisCommand::velocity(t * rad_per_tick),
+                MotorMode::Mtp => AxisCommand::position(g * rad_per_tick, t.abs() * rad_per_tick),
+            };
+        }
         Command {
-            left: scale(t0),
-            right: scale(t1),
-            mode,
-            enable: enable && !self.system_shutdown.motors,
+            axes,
+            enable: !self.system_shutdown.motors,
             seq: None,
+            timeout: None,
         }
     }
 
     /// The ladder events of one transfer, in order: the shutdown bit, then the command.
-    pub fn to_events(&self, rad_per_tick: f32) -> [Event; 2] {
+    pub fn to_events(&self, rad_per_tick: f32) -> [Event<4>; 2] {
         [
             Event::Shutdown(self.system_shutdown.motors),
             Event::Frame(self.to_command(rad_per_tick)),

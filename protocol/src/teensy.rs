@@ -39,13 +39,14 @@
 //!
 //! # Mapping onto the safety core
 //!
-//! `CMDTYPE_MTRS` carries motor angles (a position command): [`CmdMsg::to_event`] maps motors 0 and
-//! 1 to a [`ControlMode::Position`] command, which the ladder refuses (it drives wheels by speed
-//! only); the other command types concern the arm and calibration and give no ladder event.
+//! `CMDTYPE_MTRS` carries motor angles (a position command): [`CmdMsg::to_event`] maps every motor to
+//! a position axis (degrees → rad) under the message's speed as the cap, which the seed 003 profile
+//! (`statemachine::Config::TEENSY`, joints within ±π rad) accepts; the other command types concern
+//! the arm's configuration and calibration and give no ladder event.
 
 use crate::crc16;
 use crate::le;
-use statemachine::{Command, ControlMode, Event, RejectReason};
+use statemachine::{AxisCommand, Command, Event, RejectReason};
 
 /// The largest motor count supported by the robust stream decoder's buffer.
 pub const MAX_MOTORS: usize = 16;
@@ -279,15 +280,19 @@ impl<const N: usize> CmdMsg<N> {
         }
     }
 
-    /// The ladder event of this command (see the module documentation).
-    pub fn to_event(&self) -> Option<Event> {
+    /// The ladder event of this command (see the module documentation): `MTRS` moves every motor to
+    /// its angle (degrees → rad, position mode) under the message's speed (deg/s → rad/s) as the cap.
+    pub fn to_event(&self) -> Option<Event<N>> {
+        const RAD_PER_DEG: f32 = core::f32::consts::PI / 180.0;
+        let cap = self.mtr_speed_deg_s as f32 * RAD_PER_DEG;
         match self.cmd_type {
             CmdType::Mtrs => Some(Event::Frame(Command {
-                left: self.mtr_angles.first().copied().unwrap_or(0) as f32,
-                right: self.mtr_angles.get(1).copied().unwrap_or(0) as f32,
-                mode: ControlMode::Position as u32,
+                axes: self
+                    .mtr_angles
+                    .map(|deg| AxisCommand::position(deg as f32 * RAD_PER_DEG, cap)),
                 enable: true,
                 seq: None,
+                timeout: None,
             })),
             CmdType::Cal | CmdType::EndeffOn | CmdType::EndeffOff | CmdType::Config => None,
         }

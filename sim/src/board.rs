@@ -17,9 +17,12 @@ use control::{BridgeState, Q};
 use mcu::hw::RecordingBridge;
 use mcu::tick::{Runs, TickInputs};
 use mcu::tuning::Tuning;
+use mcu::AXES;
 use mcu::{Bridge, CurrentLoop, EstopInput, LinkTask, Measurements, Safety, SpeedLoop, TickTask};
 use protocol::amr::{pack_fw_version, BoardProfile, McuInfo, ResetCause, FRAME_LEN};
-use statemachine::{Output, Speed};
+use statemachine::Speed;
+
+type Output = statemachine::Output<AXES>;
 
 use crate::plant::BridgeDrive;
 

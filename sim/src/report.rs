@@ -11,13 +11,14 @@ fn opt(x: Option<f64>, digits: usize) -> String {
 }
 
 /// Column headers of the summary table.
-pub const COLUMNS: [&str; 13] = [
+pub const COLUMNS: [&str; 14] = [
     "scenario",
     "result",
     "HOLD ms",
     "STOP ms",
     "BRAKE ms",
     "BRAKE after last frame ms",
+    "bridge braked after last frame ms",
     "v at onset m/s",
     "stop distance m",
     "corrupted sent/rejected/applied",
@@ -39,6 +40,7 @@ fn row(s: &Summary, failures: &[String]) -> Vec<String> {
         opt(s.stop_ms, 1),
         opt(s.brake_ms, 1),
         opt(s.brake_after_last_frame_ms, 2),
+        opt(s.bridge_brake_after_last_frame_ms, 2),
         opt(s.speed_at_onset, 2),
         opt(s.stop_distance_m, 3),
         format!(

@@ -88,6 +88,9 @@ pub struct Summary {
     pub bridge_brake_ms: Option<f64>,
     /// First comm-loss BRAKE: time since the last valid frame, ms.
     pub brake_after_last_frame_ms: Option<f64>,
+    /// First comm-loss BRAKE at the bridge: time from the last valid frame's arrival to both
+    /// bridges braked (low sides on), ms; checked against the profile's bound in every scenario.
+    pub bridge_brake_after_last_frame_ms: Option<f64>,
     /// Distance from the onset until standstill, m.
     pub stop_distance_m: Option<f64>,
     /// Robot speed at the onset, m/s.
@@ -138,6 +141,16 @@ impl Summary {
     pub fn check(&self, sc: &Scenario) -> Vec<String> {
         let e = &sc.expect;
         let mut bad = Vec::new();
+        // SR-16: every comm-loss BRAKE reaches the bridge strictly within the profile's bound of the
+        // last valid frame (10 ms for seed 000), whatever the scenario expects besides.
+        let bound = f64::from(mcu::tuning::AMR.ladder.comm_loss_bound_ms());
+        if let Some(x) = self.bridge_brake_after_last_frame_ms {
+            if x >= bound {
+                bad.push(format!(
+                    "bridge braked {x:.3} ms after the last valid frame: the profile's bound is < {bound} ms"
+                ));
+            }
+        }
         if let Some([lo, hi]) = e.brake_after_last_frame_ms {
             match self.brake_after_last_frame_ms {
                 Some(x) if x >= lo && x <= hi => {}
@@ -543,6 +556,13 @@ pub fn run<H: HostModel>(
             if t >= o && braked && s.bridge_brake_ms.is_none() {
                 s.bridge_brake_ms = Some((t - o) * 1e3);
             }
+            if t >= o
+                && braked
+                && out.faults.contains(FaultFlags::COMM_LOST)
+                && s.bridge_brake_after_last_frame_ms.is_none()
+            {
+                s.bridge_brake_after_last_frame_ms = last_valid_t.map(|lv| (t - lv) * 1e3);
+            }
             if t >= o && odo_at_onset.is_none() {
                 odo_at_onset = Some(plant.odometer);
                 s.speed_at_onset = Some(plant.v);
@@ -563,10 +583,10 @@ pub fn run<H: HostModel>(
             tick_index += 1;
             let ws = plant.wheel_speeds();
             let hc = host.last_command();
-            let ap = match out.drive {
-                statemachine::Drive::Run { left, right } => [left.to_num::<f64>(), right.to_num()],
-                statemachine::Drive::Brake => [0.0; 2],
-            };
+            let ap = out
+                .drive
+                .speeds()
+                .map_or([0.0; 2], |s| s.map(|v| v.to_num::<f64>()));
             if opts.keep_series && tick_index % u64::from(sc.trace_every_ms) == 0 {
                 series.t.push(t);
                 for k in 0..2 {

@@ -307,11 +307,20 @@ pub mod arbitrary {
         Config::PROFILES.get(i).copied().unwrap_or(Config::DEFAULT)
     }
 
-    /// Any configuration [`Config::new`] accepts; half the time a shipped profile (so tests meet them often).
+    /// The configurations the harnesses range over. Under Kani: each shipped profile
+    /// ([`Config::PROFILES`], concrete numbers, so the solver works on constants: the proofs are
+    /// per profile, and a new profile joins the list to be proven). Under `cargo test`: a shipped
+    /// profile half the time, otherwise any configuration [`Config::new`] accepts, so the twins also
+    /// exercise the rules on configurations no profile uses yet.
     pub fn config(src: &mut impl Source) -> Option<Config> {
-        if src.bool() {
+        if cfg!(kani) || src.bool() {
             return Some(profile(src));
         }
+        any_config(src)
+    }
+
+    /// Any configuration [`Config::new`] accepts (`None` for the values it refuses).
+    pub fn any_config(src: &mut impl Source) -> Option<Config> {
         // Every value is drawn so that each valid configuration is reachable (under Kani every one
         // is); ordering and signs are arranged by construction so the tests meet valid ones often.
         let pos = |src: &mut _, max: Speed| Source::speed_within(src, max).saturating_abs();

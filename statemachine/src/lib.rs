@@ -27,8 +27,9 @@ pub mod validate;
 mod verification;
 
 pub use config::{Config, ConfigError, ConfigParams};
-pub use ladder::{Counters, Estop, Event, Ladder};
+pub use ladder::{Counters, Estop, Event, Ladder, Source};
 pub use types::{
-    Command, Condition, ControlMode, Drive, FaultFlags, Mode, Output, RejectReason, Speed,
+    AxisCommand, AxisDrive, AxisMode, Command, Condition, ControlMode, Drive, Duty, FaultFlags,
+    Mode, ModeSet, Output, Position, RejectReason, Speed, MAX_AXES,
 };
-pub use validate::{validate, Setpoint};
+pub use validate::{validate, AxisSetpoint, Setpoint};

@@ -12,7 +12,9 @@ use super::FRAME_LEN;
 use core::fmt::Write;
 use core::sync::atomic::{AtomicBool, AtomicU32, Ordering};
 use cortex_m_semihosting::{debug, hio, syscall};
-use statemachine::{Drive, Output};
+use statemachine::Drive;
+
+type Output = statemachine::Output<{ mcu::AXES }>;
 use stm32f4xx_hal::pac;
 
 /// Ticks to keep tracing after the file ended and BRAKE latched, before exiting QEMU.
@@ -98,10 +100,7 @@ pub mod hooks {
     /// Prints one trace line, pends the link task (one transaction per tick from the host file),
     /// and exits QEMU a few ticks after the file ended and BRAKE latched.
     pub fn after_tick(tick: u32, out: &Output, safety: &mcu::Safety) {
-        let (l, r) = match out.drive {
-            Drive::Run { left, right } => (left, right),
-            Drive::Brake => (statemachine::Speed::ZERO, statemachine::Speed::ZERO),
-        };
+        let [l, r] = out.drive.speeds().unwrap_or([statemachine::Speed::ZERO; 2]);
         let c = safety.ladder().counters();
         if let Ok(mut o) = hio::hstdout() {
             let _ = writeln!(

@@ -360,7 +360,12 @@ pub mod hooks {
     /// After a speed-loop sample (the ADC trigger on the board is TIM1_CC4).
     pub fn after_speed_sample() {}
     /// After a tick (the host clocks the SPI transactions on the board).
-    pub fn after_tick(_ticks: u32, _out: &statemachine::Output, _safety: &mcu::Safety) {}
+    pub fn after_tick(
+        _ticks: u32,
+        _out: &statemachine::Output<{ mcu::AXES }>,
+        _safety: &mcu::Safety,
+    ) {
+    }
 }
 #[cfg(feature = "qemu")]
 pub use emu::hooks;

@@ -11,7 +11,7 @@
 use super::*;
 use crate::cli::parse_hex;
 use crate::transport::ScriptedStream;
-use statemachine::{Command, ControlMode};
+use statemachine::{AxisCommand, Command, Source};
 
 const T: Duration = Duration::from_millis(50);
 
@@ -128,17 +128,15 @@ fn enable_and_estop_send_the_seed_frames_and_map_to_ladder_events() {
             result: 0
         })
     );
-    assert_eq!(ev, Some(Event::Rearm));
+    assert_eq!(ev, Some(Event::Rearm(Source::Primary)));
     let (_, ev) = link.enable(false, T).unwrap();
     assert_eq!(
         ev,
-        Some(Event::Frame(Command {
-            left: 0.0,
-            right: 0.0,
-            mode: ControlMode::Idle as u32,
-            enable: false,
-            seq: None
-        }))
+        Some(Event::Frame(Command::uniform(
+            AxisCommand::COAST,
+            false,
+            None
+        )))
     );
     let (r, ev) = link.estop(Estop::Engage, T).unwrap();
     assert_eq!(
@@ -148,7 +146,13 @@ fn enable_and_estop_send_the_seed_frames_and_map_to_ladder_events() {
             result: 0
         })
     );
-    assert_eq!(ev, Some(Event::Estop(Estop::Engage)));
+    assert_eq!(
+        ev,
+        Some(Event::Estop {
+            source: Source::Primary,
+            action: Estop::Engage
+        })
+    );
     assert_eq!(
         link.stream.written,
         cat(&[&h(ENABLE_1), &h(ENABLE_0), &h(ESTOP_1)])

@@ -188,29 +188,57 @@ fn push_one_byte_at_a_time() {
 
 #[test]
 fn events_for_the_ladder() {
-    assert_eq!(Message::MotorEnable(true).to_event(), Some(Event::Rearm));
+    use statemachine::{AxisCommand, AxisMode, Config, Source, Speed};
+    assert_eq!(
+        Message::MotorEnable(true).to_event(),
+        Some(Event::Rearm(Source::Primary))
+    );
     assert!(matches!(
         Message::MotorEnable(false).to_event(),
-        Some(Event::Frame(Command { enable: false, .. }))
+        Some(Event::Frame(Command { enable: false, axes, .. })) if axes == [AxisCommand::COAST; 4]
     ));
     assert_eq!(
         Message::Estop(Estop::Engage).to_event(),
-        Some(Event::Estop(Estop::Engage))
+        Some(Event::Estop {
+            source: Source::Primary,
+            action: Estop::Engage
+        })
     );
     assert_eq!(Message::Ping.to_event(), None);
+    // The seed: pwm / 1000 of full scale, 0 coasts; timeout_ms = 200 brakes at the 199th tick.
     let pwm = SetMotorPwm {
-        pwm: [500, -2000, 0, 0],
+        pwm: [500, -1000, 0, 250],
         timeout_ms: 200,
     };
     let c = pwm.to_command();
-    assert_eq!((c.left, c.right, c.mode), (0.5, -1.0, 3));
-    assert_eq!(pwm.duty(), [500, -1000, 0, 0]);
-    // The ladder refuses raw duty.
-    let r = statemachine::validate(
-        &c,
-        None,
-        statemachine::Speed::from_num(1),
-        &statemachine::Config::DEFAULT,
+    assert_eq!(
+        c.axes,
+        [
+            AxisCommand::duty(0.5),
+            AxisCommand::duty(-1.0),
+            AxisCommand::COAST,
+            AxisCommand::duty(0.25)
+        ]
     );
+    assert_eq!(c.timeout, Some(199));
+    let sp = statemachine::validate(&c, None, Speed::ONE, &Config::CDC).unwrap();
+    assert_eq!(sp.brake_after, 199);
+    assert_eq!(sp.axes[2].mode, AxisMode::Coast);
+    // Beyond full scale and a zero timeout are refused (and counted by the ladder), never clamped.
+    for bad in [
+        SetMotorPwm {
+            pwm: [1001, 0, 0, 0],
+            timeout_ms: 200,
+        },
+        SetMotorPwm {
+            pwm: [0; 4],
+            timeout_ms: 0,
+        },
+    ] {
+        let r = statemachine::validate(&bad.to_command(), None, Speed::ONE, &Config::CDC);
+        assert_eq!(r, Err(RejectReason::OutOfRange), "{bad:?}");
+    }
+    // The seed 000 profile refuses duty.
+    let r = statemachine::validate(&c, None, Speed::ONE, &Config::AMR_SPI);
     assert_eq!(r, Err(RejectReason::UnsupportedMode));
 }

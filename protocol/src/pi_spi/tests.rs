@@ -106,12 +106,39 @@ fn commands_for_the_ladder() {
         motor_target: [100, -50, 0, 0],
         ..Default::default()
     };
+    use statemachine::AxisCommand;
     let c = rx.to_command(0.01);
-    assert_eq!((c.left, c.right, c.mode, c.enable), (1.0, -0.5, 1, true));
+    assert_eq!(
+        c.axes,
+        [
+            AxisCommand::velocity(1.0),
+            AxisCommand::velocity(-0.5),
+            AxisCommand::COAST,
+            AxisCommand::COAST
+        ]
+    );
+    assert!(c.enable);
+    // Every motor in its own mode: PWM 0–399 as a fraction, MTP to the goal under |target| as the cap.
+    rx.motor_control_mode = [
+        MotorMode::Pwm,
+        MotorMode::PassiveBrake,
+        MotorMode::Mtp,
+        MotorMode::Off,
+    ];
+    rx.motor_target = [399, 0, -200, 0];
+    rx.motor_goal_position = [0, 0, 300, 0];
+    let c = rx.to_command(0.01);
+    assert_eq!(
+        c.axes,
+        [
+            AxisCommand::duty(1.0),
+            AxisCommand::SHORT,
+            AxisCommand::position(3.0, 2.0),
+            AxisCommand::COAST
+        ]
+    );
     rx.system_shutdown.motors = true;
     let [shutdown, frame] = rx.to_events(0.01);
     assert_eq!(shutdown, Event::Shutdown(true));
     assert!(matches!(frame, Event::Frame(Command { enable: false, .. })));
-    rx.motor_control_mode[1] = MotorMode::Pwm;
-    assert_eq!(rx.to_command(0.01).mode, u32::MAX);
 }

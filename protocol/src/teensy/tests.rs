@@ -94,7 +94,19 @@ fn ladder_mapping() {
     assert_eq!(m.to_event(), None);
     m.cmd_type = CmdType::Mtrs;
     match m.to_event() {
-        Some(Event::Frame(c)) => assert_eq!((c.left, c.right, c.mode), (90.0, -90.0, 2)),
+        Some(Event::Frame(c)) => {
+            // Degrees to rad, each motor to its angle under the message's 30 deg/s.
+            let [a, b, ..] = c.axes;
+            let cap = 30.0f32.to_radians();
+            assert_eq!(
+                a,
+                statemachine::AxisCommand::position(core::f32::consts::FRAC_PI_2, cap)
+            );
+            assert_eq!(
+                b,
+                statemachine::AxisCommand::position(-core::f32::consts::FRAC_PI_2, cap)
+            );
+        }
         other => panic!("{other:?}"),
     }
 }
