@@ -61,12 +61,18 @@ impl Safety {
 
     /// Feeds one event to the ladder and records what changed.
     pub fn step(&mut self, event: Event) -> Output {
+        self.apply(event);
+        self.ladder.output()
+    }
+
+    /// Steps the ladder and records what changed, without building its output: for the events the
+    /// tick applies before the tick itself (ESTOP input, board conditions).
+    pub fn apply(&mut self, event: Event) {
         // Only what the trace compares is kept from before the step (not a copy of the ladder:
         // this runs for every received frame).
         let before = Marks::of(&self.ladder);
-        let out = self.ladder.step(event);
-        self.record(&before, &out);
-        out
+        self.ladder.update(event);
+        self.record(&before);
     }
 
     /// One watchdog tick: counts it, then steps the ladder.
@@ -75,7 +81,7 @@ impl Safety {
         self.step(Event::Tick)
     }
 
-    fn record(&mut self, before: &Marks, out: &Output) {
+    fn record(&mut self, before: &Marks) {
         let t = self.ticks;
         let now = Marks::of(&self.ladder);
         if now.rearms != before.rearms {
@@ -84,18 +90,19 @@ impl Safety {
         if now.rearm_refused != before.rearm_refused {
             self.trace.push(t, Record::RearmRefused);
         }
-        if out.mode != before.mode {
+        if now.mode != before.mode {
             self.trace.push(
                 t,
                 Record::Mode {
                     from: before.mode,
-                    to: out.mode,
+                    to: now.mode,
                 },
             );
         }
         if now.brake_entries != before.brake_entries {
-            let causes = out
-                .faults
+            let causes = self
+                .ladder
+                .faults()
                 .without(FaultFlags::BRAKE_LATCHED)
                 .without(FaultFlags::LINK_DEGRADED);
             self.trace.push(t, Record::Latched(causes));

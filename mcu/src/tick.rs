@@ -96,7 +96,7 @@ impl TickTask {
     #[inline(never)]
     pub fn run(&mut self, safety: &mut Safety, inputs: &TickInputs) -> TickOutcome {
         if let Some(e) = inputs.estop {
-            safety.step(Event::Estop {
+            safety.apply(Event::Estop {
                 source: Source::Local,
                 action: e,
             });
@@ -110,7 +110,7 @@ impl TickTask {
             (Condition::ThermalWarning, inputs.thermal_warning),
             (Condition::EncoderFailure, encoder_bad),
         ] {
-            safety.step(Event::Condition { condition, active });
+            safety.apply(Event::Condition { condition, active });
         }
         let out = safety.tick();
         let bridge = bridge_state(&out.drive);

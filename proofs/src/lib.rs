@@ -104,7 +104,7 @@ fn check_delivered_as_sent(src: &mut impl Source, l0: &Ladder, l: &Ladder, cmd: 
             assert!(left.saturating_sub(sent_l).saturating_abs() <= half);
             assert!(right.saturating_sub(sent_r).saturating_abs() <= half);
             assert_eq!(sp.enable, cmd.enable);
-            assert_eq!(sp.seq, Some(cmd.seq));
+            assert_eq!(sp.seq(), Some(cmd.seq));
         }
         assert_eq!(l.age(), 0);
     }
@@ -159,6 +159,10 @@ pub fn undecodable_bytes_never_move_the_drive(src: &mut impl Source) {
     cover!(src, decoded, "bytes that form a frame");
 }
 
+/// Bits in a frame.
+const FRAME_BITS: u16 = 512;
+const _: () = assert!(FRAME_BITS as usize == FRAME_LEN * 8);
+
 /// INV-11 (Incident-A): one flipped bit anywhere in a valid command frame never reaches the ladder as a
 /// command, from any state.
 pub fn single_bit_flip_never_reaches_the_ladder(src: &mut impl Source) {
@@ -169,8 +173,7 @@ pub fn single_bit_flip_never_reaches_the_ladder(src: &mut impl Source) {
     let mut frame = [0u8; FRAME_LEN];
     encode_command(&cmd, &mut frame);
     let clean_frame = frame;
-    let bit = src.u16();
-    assume!(src, usize::from(bit) < FRAME_LEN * 8);
+    let bit = src.u16_below(FRAME_BITS);
     if let Some(b) = frame.get_mut(usize::from(bit / 8)) {
         *b ^= 1u8 << (bit % 8);
     }

@@ -1,5 +1,7 @@
-//! Randomised campaign: many short runs, each losing the link at a random moment, counting how
-//! many braked within 10 ms of the loss.
+//! Randomised campaign: many short runs, each losing the link at a random moment, checking that
+//! every comm-loss BRAKE reached the bridge strictly within the profile's bound of the last valid
+//! frame (`Config::comm_loss_bound_ms`, 10 ms for seed 000; SAFETY.md SR-16). Exits with status 1
+//! if any run did not.
 //!
 //! `cargo run --release -p sim --example campaign -- [runs] [threads]` (default 1 000 000 runs).
 //! Each run: arm, drive, random corruption (0 … 1e-2), clock drift (±50 ppm), host jitter, then
@@ -24,6 +26,9 @@ struct Tally {
     max_after_onset_ms: f64,
     max_after_last_frame_ms: f64,
     min_after_last_frame_ms: f64,
+    bridge_within_bound: u64,
+    bridge_beyond_bound: u64,
+    max_bridge_after_last_frame_ms: f64,
     corrupted_applied: u64,
     corrupted_sent: u64,
 }
@@ -115,6 +120,15 @@ fn work(from: u64, to: u64, progress: bool) -> Tally {
                 t.within_10ms_of_last_frame += 1;
             }
         }
+        let bound = f64::from(mcu::tuning::AMR.ladder.comm_loss_bound_ms());
+        if let Some(b) = s.bridge_brake_after_last_frame_ms {
+            t.max_bridge_after_last_frame_ms = t.max_bridge_after_last_frame_ms.max(b);
+            if b < bound {
+                t.bridge_within_bound += 1;
+            } else {
+                t.bridge_beyond_bound += 1;
+            }
+        }
         if progress && (i - from + 1) % (n / 20).max(1) == 0 {
             eprintln!("  {:>3.0} %", 100.0 * (i - from + 1) as f64 / n as f64);
         }
@@ -151,6 +165,11 @@ fn main() {
         t.max_after_onset_ms = t.max_after_onset_ms.max(x.max_after_onset_ms);
         t.max_after_last_frame_ms = t.max_after_last_frame_ms.max(x.max_after_last_frame_ms);
         t.min_after_last_frame_ms = t.min_after_last_frame_ms.min(x.min_after_last_frame_ms);
+        t.bridge_within_bound += x.bridge_within_bound;
+        t.bridge_beyond_bound += x.bridge_beyond_bound;
+        t.max_bridge_after_last_frame_ms = t
+            .max_bridge_after_last_frame_ms
+            .max(x.max_bridge_after_last_frame_ms);
         t.corrupted_applied += x.corrupted_applied;
         t.corrupted_sent += x.corrupted_sent;
     }
@@ -172,6 +191,13 @@ fn main() {
         "BRAKE after last valid frame, range:    {:.3} .. {:.3} ms",
         t.min_after_last_frame_ms, t.max_after_last_frame_ms
     );
+    let bound = mcu::tuning::AMR.ladder.comm_loss_bound_ms();
+    println!(
+        "bridge braked < {bound} ms after the last frame: {} of {} comm-loss BRAKEs (worst {:.3} ms)",
+        t.bridge_within_bound,
+        t.bridge_within_bound + t.bridge_beyond_bound,
+        t.max_bridge_after_last_frame_ms
+    );
     println!(
         "corrupted frames sent / applied:        {} / {}",
         t.corrupted_sent, t.corrupted_applied
@@ -180,4 +206,10 @@ fn main() {
         "wall time:                              {:.1} s",
         start.elapsed().as_secs_f64()
     );
+    if t.bridge_beyond_bound > 0 || t.bridge_within_bound == 0 {
+        eprintln!(
+            "FAIL: a comm-loss BRAKE reached the bridge outside the profile's bound (or none did)"
+        );
+        std::process::exit(1);
+    }
 }

@@ -47,6 +47,10 @@ pub trait Source {
     fn below(&mut self, n: u8) -> u8 {
         self.u8().checked_rem(n).unwrap_or(0)
     }
+    /// A value in `0..n` (n ≥ 1; 0 for n = 0).
+    fn u16_below(&mut self, n: u16) -> u16 {
+        self.u16().checked_rem(n).unwrap_or(0)
+    }
 }
 
 /// Skips (tests) or excludes (Kani) the cases where the condition is false.
@@ -100,6 +104,17 @@ impl Source for KaniSource {
         let s: Speed = Speed::from_bits(kani::any());
         kani::assume(s <= max && s >= max.saturating_neg());
         s
+    }
+    // A comparison instead of the remainder: the same values, without a divider in the formula.
+    fn below(&mut self, n: u8) -> u8 {
+        let v: u8 = kani::any();
+        kani::assume(v < n || (n == 0 && v == 0));
+        v
+    }
+    fn u16_below(&mut self, n: u16) -> u16 {
+        let v: u16 = kani::any();
+        kani::assume(v < n || (n == 0 && v == 0));
+        v
     }
     fn assume(&mut self, cond: bool) -> bool {
         kani::assume(cond);
@@ -359,7 +374,7 @@ pub mod arbitrary {
     }
 
     fn src_u16_below(src: &mut impl Source, n: u16) -> u16 {
-        src.u16().checked_rem(n).unwrap_or(0)
+        src.u16_below(n)
     }
 
     /// Any drive mode.
@@ -452,7 +467,8 @@ pub mod arbitrary {
         Setpoint {
             axes,
             enable: src.bool(),
-            seq: if src.bool() { Some(src.u32()) } else { None },
+            seq_value: src.u32(),
+            has_seq: src.bool(),
             brake_after: src_u16_below(src, p.brake_after).saturating_add(1),
         }
     }
@@ -574,11 +590,8 @@ pub mod arbitrary {
             applied,
             axis_modes,
             held,
-            last: if src.bool() {
-                Some(setpoint(src, &cfg))
-            } else {
-                None
-            },
+            last: setpoint(src, &cfg),
+            has_last: src.bool(),
             brake_after,
             prev_enable: src.bool(),
             // Ages just below each threshold are where the rungs change: drawn often for the tests.

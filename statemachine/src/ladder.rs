@@ -42,7 +42,7 @@ use crate::types::{
     AxisDrive, AxisMode, Command, Condition, Drive, FaultFlags, Mode, Output, Position,
     RejectReason, Speed,
 };
-use crate::validate::{validate, AxisSetpoint, Setpoint};
+use crate::validate::{validate_into, AxisSetpoint, Setpoint};
 
 /// Emergency-stop requests (seed 001 `ESTOP.action`, the board's ESTOP input).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -172,8 +172,12 @@ pub struct Ladder<const N: usize> {
     pub(crate) axis_modes: [AxisMode; N],
     /// The position target in force per axis (used while the axis is in position mode); within the travel.
     pub(crate) held: [Position; N],
-    /// Last valid command; cleared when BRAKE latches.
-    pub(crate) last: Option<Setpoint<N>>,
+    /// Last valid command, meaningful while `has_last` (cleared when BRAKE latches). Kept beside a
+    /// flag rather than in an `Option`: it is stored on every valid frame, and the compiler copies a
+    /// plain struct of words as words (`firmware/BUDGET.md`).
+    pub(crate) last: Setpoint<N>,
+    /// True once a valid command is held; false at power-on and after BRAKE latched.
+    pub(crate) has_last: bool,
     /// The comm-loss threshold in force: the last valid frame's, 1 ..= the profile's `brake_after`.
     pub(crate) brake_after: u16,
     /// Enable bit of the last valid frame, for the 0→1 re-arm edge. Set to true whenever BRAKE latches,
@@ -256,7 +260,8 @@ impl<const N: usize> Ladder<N> {
             applied: [Speed::ZERO; N],
             axis_modes: [AxisMode::Coast; N],
             held: [cfg.params().travel_lo; N],
-            last: None,
+            last: Setpoint::none(cfg.params().brake_after),
+            has_last: false,
             brake_after: cfg.params().brake_after,
             prev_enable: true,
             age: 0,
@@ -308,7 +313,11 @@ impl<const N: usize> Ladder<N> {
 
     /// The last valid command (None after BRAKE latched, until a new valid frame).
     pub const fn last_valid(&self) -> Option<Setpoint<N>> {
-        self.last
+        if self.has_last {
+            Some(self.last)
+        } else {
+            None
+        }
     }
 
     /// Watchdog ticks since the last valid frame.
@@ -389,10 +398,7 @@ impl<const N: usize> Ladder<N> {
                 .held
                 .iter()
                 .all(|h| in_range(*h, p.travel_lo, p.travel_hi));
-        let last_ok = match &self.last {
-            None => true,
-            Some(sp) => self.setpoint_ok(sp),
-        };
+        let last_ok = !self.has_last || self.setpoint_ok(&self.last);
         let mode_ok = match self.mode {
             Mode::Normal | Mode::Reduced => self.age < p.hold_after,
             Mode::Hold => self.age < p.stop_after,
@@ -410,7 +416,7 @@ impl<const N: usize> Ladder<N> {
             && self.brake_after <= p.brake_after
             && (self.mode == Mode::Brake) == self.brake_latched
             && self.brake_latched != self.latch_causes.is_empty()
-            && (self.brake_latched || (self.age < self.brake_after && self.last.is_some()))
+            && (self.brake_latched || (self.age < self.brake_after && self.has_last))
             && (!self.active.intersects(LATCHING) || self.brake_latched)
             && (!self.rearm_pending || self.brake_latched)
             && self.window_pos < p.window
@@ -419,6 +425,13 @@ impl<const N: usize> Ladder<N> {
 
     /// Feeds one event and returns what to apply. Never panics; all arithmetic saturates.
     pub fn step(&mut self, event: Event<N>) -> Output<N> {
+        self.update(event);
+        self.output()
+    }
+
+    /// Feeds one event without building the output ([`Self::step`] is this plus [`Self::output`]):
+    /// for a board that applies several events before it drives its outputs.
+    pub fn update(&mut self, event: Event<N>) {
         match event {
             Event::Tick => self.tick(),
             Event::Frame(cmd) => self.frame(&cmd),
@@ -459,7 +472,19 @@ impl<const N: usize> Ladder<N> {
             }
             Event::Rearm(source) => self.request_rearm(source),
         }
-        self.output()
+    }
+
+    /// The fault and status flags of the feedback frame: active conditions, latch causes, and
+    /// BRAKE_LATCHED and LINK_DEGRADED while they hold.
+    pub fn faults(&self) -> FaultFlags {
+        let mut faults = self.active.union(self.latch_causes);
+        if self.brake_latched {
+            faults = faults.union(FaultFlags::BRAKE_LATCHED);
+        }
+        if self.degraded {
+            faults = faults.union(FaultFlags::LINK_DEGRADED);
+        }
+        faults
     }
 
     /// What the current state tells the bridge, without changing anything.
@@ -493,18 +518,11 @@ impl<const N: usize> Ladder<N> {
             }
             Drive::Run(axes)
         };
-        let mut faults = self.active.union(self.latch_causes);
-        if self.brake_latched {
-            faults = faults.union(FaultFlags::BRAKE_LATCHED);
-        }
-        if self.degraded {
-            faults = faults.union(FaultFlags::LINK_DEGRADED);
-        }
         Output {
             mode: self.mode,
             drive,
             limit,
-            faults,
+            faults: self.faults(),
             age: self.age,
         }
     }
@@ -518,7 +536,7 @@ impl<const N: usize> Ladder<N> {
         self.latch_causes = self.latch_causes.union(cause);
         self.mode = Mode::Brake;
         self.applied = [Speed::ZERO; N];
-        self.last = None;
+        self.has_last = false;
         self.prev_enable = true;
         self.rearm_pending = false;
     }
@@ -589,14 +607,15 @@ impl<const N: usize> Ladder<N> {
         let allowance = p
             .max_cmd_step
             .saturating_mul_int(i32::from(self.age.max(1)));
-        match validate(cmd, self.last.as_ref(), allowance, &self.cfg) {
+        match validate_into(cmd, &mut self.last, self.has_last, allowance, &self.cfg) {
             Err(reason) => self.reject(reason),
-            Ok(sp) => {
+            Ok(()) => {
                 self.counters.valid_frames = self.counters.valid_frames.saturating_add(1);
-                let rising = sp.enable && !self.prev_enable;
-                self.prev_enable = sp.enable;
-                self.brake_after = sp.brake_after;
-                self.last = Some(sp);
+                let enable = self.last.enable;
+                let rising = enable && !self.prev_enable;
+                self.prev_enable = enable;
+                self.brake_after = self.last.brake_after;
+                self.has_last = true;
                 self.age = 0;
                 if rising {
                     self.request_rearm(Source::Primary);
@@ -626,7 +645,7 @@ impl<const N: usize> Ladder<N> {
             self.latch(FaultFlags::COMM_LOST);
         }
 
-        let enabled = matches!(self.last, Some(Setpoint { enable: true, .. }));
+        let enabled = self.has_last && self.last.enable;
         // SR-8 / INV-6: BRAKE is left only here: explicit re-arm + fresh valid frame + no active cause.
         if self.brake_latched
             && self.rearm_pending
@@ -681,10 +700,11 @@ impl<const N: usize> Ladder<N> {
             self.applied = [Speed::ZERO; N];
             return;
         }
-        let wants = match &self.last {
-            Some(sp) => sp.axes,
-            // Unreachable outside BRAKE (INV-0); coasting is the answer that drives nothing.
-            None => [AxisSetpoint::passive(AxisMode::Coast); N],
+        // Without a command (unreachable outside BRAKE, INV-0) coasting is the answer that drives nothing.
+        let wants = if self.has_last {
+            self.last.axes
+        } else {
+            [AxisSetpoint::passive(AxisMode::Coast); N]
         };
         for (((a, m), h), want) in self
             .applied
@@ -1106,19 +1126,13 @@ mod tests {
                 l.applied[1] = -P.v_max - Speed::from_bits(1)
             }),
             ("last beyond v_max", |l| {
-                if let Some(sp) = l.last.as_mut() {
-                    sp.axes[1].target = P.v_max + Speed::from_bits(1);
-                }
+                l.last.axes[1].target = P.v_max + Speed::from_bits(1);
             }),
             ("last in a mode the profile refuses", |l| {
-                if let Some(sp) = l.last.as_mut() {
-                    sp.axes[0].mode = AxisMode::Position;
-                }
+                l.last.axes[0].mode = AxisMode::Position;
             }),
             ("last with a zero threshold", |l| {
-                if let Some(sp) = l.last.as_mut() {
-                    sp.brake_after = 0;
-                }
+                l.last.brake_after = 0;
             }),
             ("threshold in force beyond the profile's", |l| {
                 l.brake_after = P.brake_after + 1
@@ -1158,7 +1172,7 @@ mod tests {
                 l.brake_latched = true;
                 l.latch_causes = FaultFlags::ESTOP;
             }),
-            ("running without a command", |l| l.last = None),
+            ("running without a command", |l| l.has_last = false),
             ("latching cause while running", |l| {
                 l.active = FaultFlags::UNDERVOLTAGE
             }),

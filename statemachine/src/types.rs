@@ -78,17 +78,19 @@ impl ModeSet {
     }
 }
 
-/// What the host asks of one axis; floats as they came off the wire, unchecked.
+/// What the host asks of one axis; floats as they came off the wire, unchecked. `repr(C)`, words
+/// first: commands are copied on every received frame (see `validate::AxisSetpoint`).
 #[derive(Clone, Copy, Debug, PartialEq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
+#[repr(C)]
 pub struct AxisCommand {
-    /// The drive mode asked for.
-    pub mode: AxisMode,
     /// Duty fraction ([`AxisMode::Duty`]), rad/s ([`AxisMode::Velocity`]) or rad ([`AxisMode::Position`]);
     /// ignored by the passive modes.
     pub target: f32,
     /// Speed cap in rad/s for [`AxisMode::Position`]; ignored by the other modes.
     pub cap: f32,
+    /// The drive mode asked for.
+    pub mode: AxisMode,
 }
 
 impl AxisCommand {
@@ -139,17 +141,18 @@ impl AxisCommand {
 /// Nothing here has been checked yet: [`crate::validate`] does that.
 #[derive(Clone, Copy, Debug, PartialEq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
+#[repr(C)]
 pub struct Command<const N: usize> {
     /// One request per axis.
     pub axes: [AxisCommand; N],
-    /// Drive enable as sent (0 disabled, anything else enabled).
-    pub enable: bool,
     /// Sequence number, where the link carries one; used to refuse repeated and stale frames.
     pub seq: Option<u32>,
     /// The frame's own comm-loss threshold in ticks since it arrived (seed 001 `timeout_ms`, see
     /// [`crate::config::brake_age_for_timeout_ms`]), where the link carries one; the profile's
     /// `brake_after` caps it.
     pub timeout: Option<u16>,
+    /// Drive enable as sent (0 disabled, anything else enabled).
+    pub enable: bool,
 }
 
 impl<const N: usize> Command<N> {

@@ -7,14 +7,19 @@ use crate::config::Config;
 use crate::types::{AxisCommand, AxisMode, Command, Duty, Position, RejectReason, Speed};
 
 /// One axis of a command that passed validation.
+///
+/// `repr(C)`, words first: setpoints are copied on every received frame, and with the byte-sized
+/// fields last a copy is whole words (the default layout led the compiler to copy them byte-wise
+/// from an odd offset, a fifth of a frame's instructions on the Cortex-M4; `firmware/BUDGET.md`).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[repr(C)]
 pub struct AxisSetpoint {
-    /// A mode the profile accepts.
-    pub mode: AxisMode,
     /// |duty| ≤ duty_max, |speed| ≤ v_max, or a position within the travel; zero for the passive modes.
     pub target: Speed,
     /// Position speed cap in 0 ..= v_max; zero for the other modes.
     pub cap: Speed,
+    /// A mode the profile accepts.
+    pub mode: AxisMode,
 }
 
 impl AxisSetpoint {
@@ -28,21 +33,47 @@ impl AxisSetpoint {
     }
 }
 
-/// A command that passed validation: finite, in range, modes the profile accepts.
+/// A command that passed validation: finite, in range, modes the profile accepts. `repr(C)`, words
+/// first, for the reason given at [`AxisSetpoint`].
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[repr(C)]
 pub struct Setpoint<const N: usize> {
     /// One validated request per axis.
     pub axes: [AxisSetpoint; N],
-    /// Drive enabled.
-    pub enable: bool,
-    /// Sequence number, where the link carries one.
-    pub seq: Option<u32>,
+    /// Sequence number, meaningful if `has_seq` (see [`Setpoint::seq`]). Not an `Option<u32>`: its
+    /// tag word is one meaningful byte and three undefined ones, which the compiler copies apart from
+    /// the rest, byte-wise.
+    pub seq_value: u32,
     /// The comm-loss threshold this frame leaves in force: its `timeout` capped by the profile's
     /// `brake_after`, at least 1.
     pub brake_after: u16,
+    /// True if the link carries a sequence number.
+    pub has_seq: bool,
+    /// Drive enabled.
+    pub enable: bool,
 }
 
 impl<const N: usize> Setpoint<N> {
+    /// A placeholder for "no command": every axis coasting, disabled, the given threshold.
+    pub const fn none(brake_after: u16) -> Self {
+        Self {
+            axes: [AxisSetpoint::passive(AxisMode::Coast); N],
+            seq_value: 0,
+            brake_after,
+            has_seq: false,
+            enable: false,
+        }
+    }
+
+    /// The sequence number, where the link carries one.
+    pub const fn seq(&self) -> Option<u32> {
+        if self.has_seq {
+            Some(self.seq_value)
+        } else {
+            None
+        }
+    }
+
     /// True if applying this setpoint would put drive torque on axis `i` (enabled, not passive).
     pub fn drives(&self, i: usize) -> bool {
         self.enable && self.axes.get(i).is_some_and(|a| !a.mode.is_passive())
@@ -166,6 +197,25 @@ pub fn validate<const N: usize>(
     allowance: Speed,
     cfg: &Config,
 ) -> Result<Setpoint<N>, RejectReason> {
+    let mut sp = match last {
+        Some(l) => *l,
+        None => Setpoint::none(cfg.params().brake_after),
+    };
+    validate_into(cmd, &mut sp, last.is_some(), allowance, cfg)?;
+    Ok(sp)
+}
+
+/// [`validate`] in place, as the ladder runs it: checks `cmd` against `last` (meaningful if
+/// `has_last`) and, only if every check passes, overwrites `last` with the new setpoint; a refused
+/// command leaves `last` as it was. (In place because the setpoint is then stored without a copy:
+/// on the Cortex-M4 the compiler copied a returned setpoint byte-wise, `firmware/BUDGET.md`.)
+pub fn validate_into<const N: usize>(
+    cmd: &Command<N>,
+    last: &mut Setpoint<N>,
+    has_last: bool,
+    allowance: Speed,
+    cfg: &Config,
+) -> Result<(), RejectReason> {
     let mut axes = [AxisSetpoint::passive(AxisMode::Coast); N];
     for (out, a) in axes.iter_mut().zip(cmd.axes.iter()) {
         *out = validate_axis(a, cfg)?;
@@ -177,30 +227,17 @@ pub fn validate<const N: usize>(
         Some(t) if t < brake_max => t,
         Some(_) => brake_max,
     };
-    if let (
-        Some(seq),
-        Some(Setpoint {
-            seq: Some(prev), ..
-        }),
-    ) = (cmd.seq, last)
-    {
+    if let (Some(seq), true, true) = (cmd.seq, has_last, last.has_seq) {
         // SR-3: a repeated or older frame is refused.
-        if !seq_is_newer(seq, *prev) {
+        if !seq_is_newer(seq, last.seq_value) {
             return Err(RejectReason::Stale);
         }
     }
-    let sp = Setpoint {
-        axes,
-        enable: cmd.enable,
-        seq: cmd.seq,
-        brake_after,
-    };
-    if let Some(prev) = last {
-        for (i, (a, b)) in sp.axes.iter().zip(prev.axes.iter()).enumerate() {
-            let both_velocity = a.mode == AxisMode::Velocity && b.mode == AxisMode::Velocity;
-            if both_velocity
-                && sp.drives(i)
-                && prev.drives(i)
+    // A velocity axis drives exactly when its command is enabled (velocity is not a passive mode).
+    if has_last && last.enable && cmd.enable {
+        for (a, b) in axes.iter().zip(last.axes.iter()) {
+            if a.mode == AxisMode::Velocity
+                && b.mode == AxisMode::Velocity
                 && a.target != Speed::ZERO
                 && !within(a.target, b.target, allowance)
             {
@@ -209,7 +246,12 @@ pub fn validate<const N: usize>(
             }
         }
     }
-    Ok(sp)
+    last.axes = axes;
+    last.seq_value = cmd.seq.unwrap_or(0);
+    last.has_seq = cmd.seq.is_some();
+    last.brake_after = brake_after;
+    last.enable = cmd.enable;
+    Ok(())
 }
 
 #[cfg(test)]
