@@ -1,12 +1,16 @@
 //! Fixed-point motor control for the differential-drive base: speed PID, current PI, rate limiter,
-//! kinematics, measurement scaling and the bridge mapping. The board application (`mcu`) composes
-//! these into the firmware's task bodies.
+//! kinematics, measurement scaling and the bridge mapping, and the trapezoidal position profile of
+//! a position-mode axis. The board application (`mcu`) composes these into the firmware's task
+//! bodies.
 //!
 //! ```text
 //!  ladder setpoint ─► RateLimiter ─► SpeedPid ─► current ref ─► CurrentPi ─► duty ─► bridge::bridge_compare ─► PWM
 //!  (1 kHz, rad/s)      (10 kHz)      (10 kHz)      (A)           (20 kHz)    [-1, 1]
 //!                                        ▲                          ▲
 //!                     sense::SpeedEstimator (encoders)    sense::adc_to_amps (shunt ADC)
+//!
+//!  position axis:  target, cap ─► profile::Trapezoid ─► position ref (rad) + speed ref (rad/s)
+//!                  (rad, rad/s)    (1 kHz, within the travel, never past the target, |v| ≤ cap)
 //! ```
 //!
 //! Units and number formats (all Q16.16, [`fixed::types::I16F16`], so one multiply costs one
@@ -19,6 +23,7 @@
 //! | [`Duty`]         | 1     | [-1, 1]           | 1.5e-5 (the PWM has 2.4e-4 at ARR 4200) |
 //! | [`Gain`]         | mixed | ±32768            | 1.5e-5         |
 //! | [`Meters`], [`MetersPerSecond`] | m, m/s | ±32768 | 15 µm |
+//! | [`Position`]     | rad   | the axis travel   | 1.5e-5 rad (1.5e-8 rad inside the profile) |
 //!
 //! Every function saturates instead of overflowing and never panics; the bounds are proved by the
 //! harnesses in `verification` (Kani) and checked by their `cargo test` twins.
@@ -40,6 +45,7 @@
 pub mod bridge;
 pub mod kinematics;
 pub mod pid;
+pub mod profile;
 pub mod rate;
 pub mod sense;
 
@@ -49,6 +55,7 @@ mod verification;
 pub use bridge::{BridgeCompare, BridgeState};
 pub use kinematics::{DiffDrive, KinematicsError, Twist};
 pub use pid::{AntiWindup, CurrentPi, Pid, PidGains, SpeedPid};
+pub use profile::{Position, ProfileLimits, Trapezoid, Travel};
 pub use rate::RateLimiter;
 pub use sense::SpeedEstimator;
 pub use statemachine::Speed;
