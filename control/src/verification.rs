@@ -17,7 +17,7 @@ use crate::rate::RateLimiter;
 use crate::sense::{adc_to_amps, SpeedEstimator};
 use crate::{within, Q};
 use statemachine::harness::Source;
-use statemachine::{assume, cover};
+use statemachine::{assume, check, cover};
 
 fn q(src: &mut impl Source) -> Q {
     Q::from_bits(src.i32())
@@ -246,18 +246,6 @@ pub fn speed_estimator_total(src: &mut impl Source) {
         assert!(s.unsigned_abs() <= scale.unsigned_abs().saturating_mul_int(32_768));
     }
     cover!(src, e.total() != 0, "wheel moved");
-}
-
-/// `assert!` with a message naming the property, which Kani reports as the check's description
-/// (it shows the literal of an `assert!` only as a placeholder).
-macro_rules! check {
-    ($cond:expr, $msg:literal) => {{
-        let c: bool = $cond;
-        #[cfg(kani)]
-        kani::assert(c, $msg);
-        #[cfg(not(kani))]
-        assert!(c, $msg);
-    }};
 }
 
 /// Any value, `base` itself, or (for the twins: random bits rarely land close to each other) a

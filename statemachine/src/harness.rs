@@ -76,6 +76,20 @@ macro_rules! cover {
     }};
 }
 
+/// A harness assertion with a static message naming the property: `kani::assert` under Kani, so a
+/// failing proof reports the message (Kani prints a placeholder for `assert!`'s panic message),
+/// `assert!` under `cargo test`.
+#[macro_export]
+macro_rules! check {
+    ($cond:expr, $msg:literal) => {{
+        let c: bool = $cond;
+        #[cfg(kani)]
+        kani::assert(c, $msg);
+        #[cfg(not(kani))]
+        assert!(c, $msg);
+    }};
+}
+
 /// Symbolic inputs for Kani.
 #[cfg(kani)]
 pub struct KaniSource;

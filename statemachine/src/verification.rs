@@ -9,7 +9,7 @@ use crate::harness::{arbitrary, Source};
 use crate::ladder::{Estop, Event, Ladder, Source as Origin, LATCHING};
 use crate::types::{AxisDrive, AxisMode, Drive, FaultFlags, Mode, RejectReason, Speed};
 use crate::validate::validate_into;
-use crate::{assume, cover, Config};
+use crate::{assume, check, cover, Config};
 
 fn magnitude(s: Speed) -> Speed {
     s.saturating_abs()
@@ -31,18 +31,18 @@ pub fn initial_state_is_valid<const N: usize>(src: &mut impl Source) {
     assume!(src, cfg.is_some());
     let Some(cfg) = cfg else { return };
     let mut l = Ladder::<N>::new(cfg);
-    assert!(l.is_valid(), "INV-0: the power-on state is valid");
-    assert!(
+    check!(l.is_valid(), "INV-0: the power-on state is valid");
+    check!(
         l.output().drive == Drive::Brake,
         "INV-0: the power-on state is BRAKE"
     );
-    assert!(
+    check!(
         l.output().faults.contains(FaultFlags::POWER_ON),
         "INV-0: the power-on state reports POWER_ON"
     );
     cover!(src, !cfg.is_1khz(), "a profile slower than 1 kHz");
     let out = l.step(Event::Tick);
-    assert!(out.drive == Drive::Brake, "INV-0: ticks alone never arm");
+    check!(out.drive == Drive::Brake, "INV-0: ticks alone never arm");
 }
 
 /// INV-0 (step), INV-2, INV-9: every event from every valid state keeps the invariant, never panics
@@ -54,11 +54,11 @@ pub fn step_preserves_invariant<const N: usize>(src: &mut impl Source) {
     let e = arbitrary::event(src);
     let mut l = l0;
     let out = l.step(e);
-    assert!(l.is_valid(), "INV-0: step preserves the invariant");
-    assert!(out == l.output(), "step returns the state's output");
+    check!(l.is_valid(), "INV-0: step preserves the invariant");
+    check!(out == l.output(), "step returns the state's output");
     let p = l.config().params();
     if out.age >= p.hold_after {
-        assert!(
+        check!(
             !matches!(out.mode, Mode::Normal | Mode::Reduced),
             "INV-2: a late link is never NORMAL or REDUCED"
         );
@@ -106,11 +106,20 @@ pub fn step_preserves_invariant<const N: usize>(src: &mut impl Source) {
 }
 
 /// INV-1 (unrolled, thresholds ≤ 9): with no valid frame, BRAKE is reached at the threshold in force
-/// from any valid state, whatever else happens between the ticks.
+/// from any valid state, whatever else happens between the ticks. Under Kani on the 1 kHz profile
+/// (seed 000's, the one whose whole horizon is ≤ 9 ticks; every profile's bound is INV-18's
+/// induction), in the twins on any configuration.
 pub fn comm_loss_brakes_within_brake_after_ticks<const N: usize>(src: &mut impl Source) {
-    let l0 = valid_ladder::<N>(src);
-    assume!(src, l0.is_some());
-    let Some(mut l) = l0 else { return };
+    let cfg = if cfg!(kani) {
+        Some(crate::Config::AMR_SPI)
+    } else {
+        arbitrary::config(src)
+    };
+    assume!(src, cfg.is_some());
+    let Some(cfg) = cfg else { return };
+    let l0 = arbitrary::ladder::<N>(src, cfg);
+    assume!(src, l0.is_valid());
+    let mut l = l0;
     let start = l.mode();
     let brake_after = l.brake_after();
     assume!(src, brake_after <= crate::config::MAX_BRAKE_AFTER_1KHZ);
@@ -119,7 +128,10 @@ pub fn comm_loss_brakes_within_brake_after_ticks<const N: usize>(src: &mut impl 
         if k > brake_after {
             break;
         }
-        if src.bool() {
+        // The twins put any non-frame event between the ticks; under Kani the ticks run back to
+        // back, since what the other events may do between them is INV-18's (one step, any event),
+        // and unrolled nine times over every event the proof took ten minutes.
+        if !cfg!(kani) && src.bool() {
             l.step(arbitrary::event_without_valid_frame(src));
         }
         let out = l.step(Event::Tick);
@@ -127,7 +139,7 @@ pub fn comm_loss_brakes_within_brake_after_ticks<const N: usize>(src: &mut impl 
             braked_at = Some(k);
         }
         if k == brake_after {
-            assert!(
+            check!(
                 out.mode == Mode::Brake && out.drive == Drive::Brake,
                 "INV-1: comm loss brakes at the threshold"
             );
@@ -160,32 +172,32 @@ pub fn comm_loss_age_advances<const N: usize>(src: &mut impl Source) {
     };
     let mut l = l0;
     let out = l.step(e);
-    assert!(
+    check!(
         l.brake_after() <= l0.brake_after()
             || l.counters().valid_frames != l0.counters().valid_frames,
         "INV-18: only a valid frame changes the threshold"
     );
-    assert!(
+    check!(
         l.brake_after() <= l.config().params().brake_after,
         "INV-18: the threshold never exceeds the profile's brake_after"
     );
-    assert!(
+    check!(
         l.counters().valid_frames == l0.counters().valid_frames,
         "INV-18: an event without a valid frame validates nothing"
     );
     if e == Event::Tick {
-        assert!(
+        check!(
             l.age() == l0.age().saturating_add(1),
             "INV-18: a tick adds one to the age"
         );
         if l.age() >= l.brake_after() {
-            assert!(
+            check!(
                 out.drive == Drive::Brake,
                 "INV-18: at the threshold the drive is BRAKE"
             );
         }
     } else {
-        assert!(l.age() == l0.age(), "INV-18: only ticks move the age");
+        check!(l.age() == l0.age(), "INV-18: only ticks move the age");
     }
     cover!(
         src,
@@ -228,25 +240,25 @@ pub fn applied_within_mode_limit<const N: usize>(src: &mut impl Source) {
         } else {
             (p.v_max, p.reduced_limit)
         };
-        assert!(
+        check!(
             m1 <= full,
             "INV-3/INV-16: |applied| within the mode's limit"
         );
         match out.mode {
             Mode::Normal => {}
             // Ramping down toward the reduced limit; between ticks the setpoint does not move.
-            Mode::Reduced => assert!(
+            Mode::Reduced => check!(
                 m1 <= reduced || m1 < m0 || (!ticked && m1 == m0),
                 "INV-3/INV-16: REDUCED above its limit only while falling"
             ),
             Mode::Hold | Mode::Stop => {
-                assert!(m1 <= m0, "INV-3: HOLD and STOP never speed up");
-                assert!(
+                check!(m1 <= m0, "INV-3: HOLD and STOP never speed up");
+                check!(
                     a1 == Speed::ZERO || (a1 > Speed::ZERO) == (a0 > Speed::ZERO),
                     "INV-3: HOLD and STOP never reverse"
                 );
             }
-            Mode::Brake => assert!(a1 == Speed::ZERO, "INV-3: BRAKE applies nothing"),
+            Mode::Brake => check!(a1 == Speed::ZERO, "INV-3: BRAKE applies nothing"),
         }
     }
     let any =
@@ -291,7 +303,7 @@ pub fn rejected_frames_change_nothing_applied<const N: usize>(src: &mut impl Sou
     let refused = l.counters().rejected_total() != l0.counters().rejected_total()
         || matches!(e, Event::Rejected(_));
     if refused {
-        assert!(
+        check!(
             l.applied() == l0.applied()
                 && l.axis_modes() == l0.axis_modes()
                 && l.last_valid() == l0.last_valid()
@@ -341,7 +353,7 @@ pub fn validated_setpoints_are_finite_and_in_range<const N: usize>(src: &mut imp
     let mut sp = last0;
     let r = validate_into(&cmd, &mut sp, has_last, allowance, &cfg);
     if r.is_err() {
-        assert!(
+        check!(
             sp == last0,
             "INV-4: a refused command leaves the last setpoint as it was"
         );
@@ -355,8 +367,8 @@ pub fn validated_setpoints_are_finite_and_in_range<const N: usize>(src: &mut imp
     let within = |s: Speed, lo: Speed, hi: Speed| s >= lo && s <= hi;
     if let Ok(sp) = r {
         for (a, c) in sp.axes.iter().zip(cmd.axes.iter()) {
-            assert!(a.mode == c.mode, "INV-5: the mode is the one sent");
-            assert!(
+            check!(a.mode == c.mode, "INV-5: the mode is the one sent");
+            check!(
                 p.modes.contains(a.mode),
                 "INV-5: only the profile's modes are accepted"
             );
@@ -383,12 +395,12 @@ pub fn validated_setpoints_are_finite_and_in_range<const N: usize>(src: &mut imp
                         && close(a.cap, c.cap)
                 }
             };
-            assert!(
+            check!(
                 ok,
                 "INV-5/INV-15: an accepted target is finite, in its mode's range and as sent"
             );
         }
-        assert!(
+        check!(
             sp.brake_after >= 1 && sp.brake_after <= p.brake_after,
             "INV-18: a frame's threshold is 1 ..= the profile's brake_after"
         );
@@ -396,11 +408,11 @@ pub fn validated_setpoints_are_finite_and_in_range<const N: usize>(src: &mut imp
             Some(t) if t < p.brake_after => t,
             _ => p.brake_after,
         };
-        assert!(
+        check!(
             sp.brake_after == want && cmd.timeout != Some(0),
             "INV-18: a frame's threshold is its timeout capped by brake_after; zero is refused"
         );
-        assert!(
+        check!(
             sp.enable == cmd.enable && sp.seq() == cmd.seq,
             "INV-5: enable and sequence number as sent"
         );
@@ -408,7 +420,7 @@ pub fn validated_setpoints_are_finite_and_in_range<const N: usize>(src: &mut imp
     let first = cmd.axes.first().copied();
     let nan_driving = first.is_some_and(|a| !a.mode.is_passive() && a.target.is_nan());
     if nan_driving {
-        assert!(r.is_err(), "INV-5: a NaN target is always refused");
+        check!(r.is_err(), "INV-5: a NaN target is always refused");
     }
     cover!(
         src,
@@ -444,16 +456,16 @@ pub fn brake_left_only_by_rearm_and_fresh_frames<const N: usize>(src: &mut impl 
     let mut l = l0;
     l.step(e);
     if l0.brake_latched() && !l.brake_latched() {
-        assert!(e == Event::Tick, "INV-6: BRAKE is left only at a tick");
-        assert!(
+        check!(e == Event::Tick, "INV-6: BRAKE is left only at a tick");
+        check!(
             l0.rearm_pending && l0.age() == 0,
             "INV-6: BRAKE is left only with a re-arm and a fresh frame"
         );
-        assert!(
+        check!(
             !l0.active.intersects(LATCHING),
             "INV-6: BRAKE is left only with no latching cause"
         );
-        assert!(
+        check!(
             matches!(l.last_valid(), Some(sp) if sp.enable),
             "INV-6: BRAKE is left only for an enabled command"
         );
@@ -465,12 +477,12 @@ pub fn brake_left_only_by_rearm_and_fresh_frames<const N: usize>(src: &mut impl 
         _ => None,
     };
     if !l0.rearm_pending && l.rearm_pending {
-        assert!(
+        check!(
             requester.is_some(),
             "INV-6: a re-arm is pending only by a request"
         );
         if l0.latch_causes.contains(FaultFlags::ESTOP) {
-            assert!(
+            check!(
                 l0.estop_released_by == Some(Origin::Local) || l0.estop_released_by == requester,
                 "INV-14: after ESTOP only the releasing source re-arms"
             );
@@ -480,14 +492,14 @@ pub fn brake_left_only_by_rearm_and_fresh_frames<const N: usize>(src: &mut impl 
     for s in Origin::ALL {
         let released = matches!(e, Event::Estop { source, action: Estop::Release } if source == s || source == Origin::Local);
         if l0.estop_owners() & s.bit() != 0 && !released {
-            assert!(
+            check!(
                 l.estop_owners() & s.bit() != 0,
                 "INV-14: ESTOP is released only by its owner or the local input"
             );
         }
     }
     if l0.active.contains(FaultFlags::ESTOP) {
-        assert!(l.brake_latched(), "INV-6: ESTOP keeps BRAKE latched");
+        check!(l.brake_latched(), "INV-6: ESTOP keeps BRAKE latched");
         if !matches!(
             e,
             Event::Estop {
@@ -495,7 +507,7 @@ pub fn brake_left_only_by_rearm_and_fresh_frames<const N: usize>(src: &mut impl 
                 ..
             }
         ) {
-            assert!(
+            check!(
                 l.active.contains(FaultFlags::ESTOP),
                 "INV-6: the ESTOP flag is cleared only by a release"
             );
@@ -554,7 +566,7 @@ pub fn latching_faults_cut_pwm_in_same_step<const N: usize>(src: &mut impl Sourc
     };
     let was_running = matches!(l.output().drive, Drive::Run(_));
     let out = l.step(e);
-    assert!(
+    check!(
         out.drive == Drive::Brake && out.mode == Mode::Brake,
         "INV-7: a latching fault brakes in the same step"
     );
@@ -592,11 +604,11 @@ pub fn setpoint_step_is_bounded<const N: usize>(src: &mut impl Source) {
     let p = *l.config().params();
     let bound = l.config().max_tick_step();
     if e != Event::Tick {
-        assert!(
+        check!(
             l.applied() == l0.applied() || out.mode == Mode::Brake,
             "INV-8: only ticks move the setpoints"
         );
-        assert!(
+        check!(
             l.axis_modes() == l0.axis_modes(),
             "INV-19: only ticks change an axis's mode"
         );
@@ -616,12 +628,12 @@ pub fn setpoint_step_is_bounded<const N: usize>(src: &mut impl Source) {
                     bound
                 };
                 let d = a1.saturating_sub(a0);
-                assert!(
+                check!(
                     d <= step && d >= -step,
                     "INV-8: a setpoint moves at most one step per tick"
                 );
             } else {
-                assert!(
+                check!(
                     a0 == Speed::ZERO || m1.is_passive(),
                     "INV-19: an axis changes mode only from rest or into a passive mode"
                 );
@@ -679,7 +691,7 @@ pub fn drive_follows_axis_modes<const N: usize>(src: &mut impl Source) {
                 }
                 _ => false,
             };
-            assert!(
+            check!(
                 ok,
                 "INV-17/INV-15: each axis is driven in its own mode, positions within the travel"
             );
@@ -688,7 +700,7 @@ pub fn drive_follows_axis_modes<const N: usize>(src: &mut impl Source) {
             if e == Event::Tick {
                 if let Some(w) = want {
                     if w.mode.is_passive() {
-                        assert!(
+                        check!(
                             matches!(d, AxisDrive::Coast | AxisDrive::Short),
                             "INV-17: a coast or short request never becomes drive"
                         );
@@ -745,7 +757,7 @@ pub fn comm_loss_brakes_after_any_prefix<const N: usize>(src: &mut impl Source) 
     for _ in 0..cfg.params().brake_after {
         l.step(Event::Tick);
     }
-    assert!(
+    check!(
         l.output().drive == Drive::Brake,
         "INV-1: comm loss brakes after any reachable prefix"
     );
@@ -764,7 +776,9 @@ pub fn comm_loss_brakes_after_any_prefix<const N: usize>(src: &mut impl Source) 
 /// (and more: any refusal at any time), so a ladder harness proven with it in place of
 /// `validate_into` holds with the real one, and the ladder harnesses need no symbolic float
 /// conversions, which INV-5's harness covers once.
+// Referenced only by the `kani::stub` attributes, which rustc does not count as uses.
 #[cfg(kani)]
+#[allow(dead_code)]
 pub(crate) mod model {
     use crate::types::{AxisMode, Command, RejectReason, Speed};
     use crate::validate::{AxisSetpoint, Setpoint};
@@ -836,12 +850,14 @@ pub(crate) mod model {
     }
 }
 
-/// One Kani proof per axis count for each body; `stubbed` bodies run with [`model::any_validation`]
+/// One Kani proof per axis count for each body (N = 2 and 4; the two INV-1 cross-checks, unrolled over
+/// the whole horizon, N = 2 only: for N = 4 their conclusion is INV-18's induction, and unrolled they
+/// are the slowest proofs by far); `stubbed` bodies run with [`model::any_validation`]
 /// in place of [`validate_into`] (compositional: `validate_into` itself is proven by INV-5's harness).
 #[cfg(kani)]
 macro_rules! proofs {
-    ($($kind:ident $body:ident => $two:ident, $four:ident;)*) => {
-        $( proofs!(@one $kind $body $two 2); proofs!(@one $kind $body $four 4); )*
+    ($($kind:ident $body:ident => $two:ident $(, $four:ident)?;)*) => {
+        $( proofs!(@one $kind $body $two 2); $(proofs!(@one $kind $body $four 4);)? )*
     };
     (@one plain $body:ident $name:ident $n:literal) => {
         #[kani::proof]
@@ -867,7 +883,7 @@ mod kani_entry {
     proofs! {
         plain initial_state_is_valid => verify_initial_state_is_valid_2, verify_initial_state_is_valid_4;
         stubbed step_preserves_invariant => verify_step_preserves_invariant_2, verify_step_preserves_invariant_4;
-        stubbed comm_loss_brakes_within_brake_after_ticks => verify_comm_loss_brakes_within_brake_after_ticks_2, verify_comm_loss_brakes_within_brake_after_ticks_4;
+        stubbed comm_loss_brakes_within_brake_after_ticks => verify_comm_loss_brakes_within_brake_after_ticks_2;
         stubbed comm_loss_age_advances => verify_comm_loss_age_advances_2, verify_comm_loss_age_advances_4;
         stubbed applied_within_mode_limit => verify_applied_within_mode_limit_2, verify_applied_within_mode_limit_4;
         stubbed rejected_frames_change_nothing_applied => verify_rejected_frames_change_nothing_applied_2, verify_rejected_frames_change_nothing_applied_4;
@@ -876,11 +892,12 @@ mod kani_entry {
         plain latching_faults_cut_pwm_in_same_step => verify_latching_faults_cut_pwm_in_same_step_2, verify_latching_faults_cut_pwm_in_same_step_4;
         stubbed setpoint_step_is_bounded => verify_setpoint_step_is_bounded_2, verify_setpoint_step_is_bounded_4;
         stubbed drive_follows_axis_modes => verify_drive_follows_axis_modes_2, verify_drive_follows_axis_modes_4;
-        plain comm_loss_brakes_after_any_prefix => verify_comm_loss_brakes_after_any_prefix_2, verify_comm_loss_brakes_after_any_prefix_4;
+        plain comm_loss_brakes_after_any_prefix => verify_comm_loss_brakes_after_any_prefix_2;
     }
 }
 
 /// The `cargo test` twin of each body, for N = 2 and N = 4: (seed, cases, cover points).
+#[cfg(test)]
 macro_rules! twins {
     ($($body:ident => $seed:expr, $cases:expr, $covers:expr;)*) => {
         $(

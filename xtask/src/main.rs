@@ -1,0 +1,151 @@
+//! Project chores: `cargo xtask <command>`.
+//!
+//! `kani-table <dir>`: reads the per-harness result files that `cargo kani -Z unstable-options
+//! --output-into-files` writes (one file per harness, named by its path) and prints the Markdown
+//! table of `proofs/REPORT.md`: harness, result, checks, covers, verification time, one row per
+//! harness in name order, so the report's figures come from a run, not from typing.
+#![forbid(unsafe_code)]
+
+use std::fmt::Write as _;
+use std::path::Path;
+use std::process::ExitCode;
+
+/// What one harness's result file says.
+#[derive(Debug, Default, PartialEq)]
+struct Row {
+    harness: String,
+    verified: Option<bool>,
+    checks: Option<String>,
+    covers: Option<String>,
+    seconds: Option<f64>,
+}
+
+/// Reads the summary lines of one result file (the last occurrence of each wins).
+fn parse(harness: &str, text: &str) -> Row {
+    let mut row = Row {
+        harness: harness.to_string(),
+        ..Row::default()
+    };
+    for line in text.lines().map(str::trim) {
+        if let Some(rest) = line.strip_prefix("** ") {
+            if rest.contains("cover properties satisfied") {
+                row.covers = Some(rest.replace(" cover properties satisfied", " satisfied"));
+            } else if rest.contains(" failed") {
+                row.checks = Some(rest.to_string());
+            }
+        } else if let Some(v) = line.strip_prefix("VERIFICATION:- ") {
+            row.verified = Some(v == "SUCCESSFUL");
+        } else if let Some(t) = line.strip_prefix("Verification Time: ") {
+            row.seconds = t.trim_end_matches('s').parse().ok();
+        }
+    }
+    row
+}
+
+/// The Markdown table of `rows`.
+fn table(rows: &[Row]) -> String {
+    let mut out =
+        String::from("| harness | result | checks | covers | time |\n|---|---|---|---|---|\n");
+    let mut total = 0.0;
+    for r in rows {
+        let result = match r.verified {
+            Some(true) => "VERIFIED",
+            Some(false) => "**FAILED**",
+            None => "no result",
+        };
+        let time = r.seconds.map_or("–".to_string(), |s| {
+            total += s;
+            format!("{s:.1} s")
+        });
+        let _ = writeln!(
+            out,
+            "| `{}` | {} | {} | {} | {} |",
+            r.harness,
+            result,
+            r.checks.as_deref().unwrap_or("–"),
+            r.covers.as_deref().unwrap_or("–"),
+            time
+        );
+    }
+    let _ = writeln!(
+        out,
+        "\n{} harnesses, verification times summing to {total:.0} s.",
+        rows.len()
+    );
+    out
+}
+
+fn kani_table(dir: &Path) -> Result<String, String> {
+    let entries = std::fs::read_dir(dir).map_err(|e| format!("{}: {e}", dir.display()))?;
+    let mut rows = Vec::new();
+    for entry in entries {
+        let path = entry.map_err(|e| e.to_string())?.path();
+        let name = path
+            .file_name()
+            .map(|n| n.to_string_lossy().into_owned())
+            .unwrap_or_default();
+        let text =
+            std::fs::read_to_string(&path).map_err(|e| format!("{}: {e}", path.display()))?;
+        let harness = name.rsplit("::").next().unwrap_or(&name).to_string();
+        rows.push(parse(&harness, &text));
+    }
+    if rows.is_empty() {
+        return Err(format!("{}: no result files", dir.display()));
+    }
+    rows.sort_by(|a, b| a.harness.cmp(&b.harness));
+    Ok(table(&rows))
+}
+
+fn main() -> ExitCode {
+    let args: Vec<String> = std::env::args().skip(1).collect();
+    match args
+        .iter()
+        .map(String::as_str)
+        .collect::<Vec<_>>()
+        .as_slice()
+    {
+        ["kani-table", dir] => match kani_table(Path::new(dir)) {
+            Ok(t) => {
+                print!("{t}");
+                ExitCode::SUCCESS
+            }
+            Err(e) => {
+                eprintln!("xtask kani-table: {e}");
+                ExitCode::FAILURE
+            }
+        },
+        _ => {
+            eprintln!("usage: cargo xtask kani-table <dir of `--output-into-files` results>");
+            ExitCode::FAILURE
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn reads_a_kani_summary() {
+        let text = "Checking harness x...\n\t - Status: SUCCESS\nSUMMARY:\n ** 0 of 3178 failed (37 unreachable)\n ** 3 of 3 cover properties satisfied\nVERIFICATION:- SUCCESSFUL\nVerification Time: 46.92777s\n";
+        let r = parse("verify_x_2", text);
+        assert_eq!(r.verified, Some(true));
+        assert_eq!(
+            r.checks.as_deref(),
+            Some("0 of 3178 failed (37 unreachable)")
+        );
+        assert_eq!(r.covers.as_deref(), Some("3 of 3 satisfied"));
+        assert_eq!(r.seconds, Some(46.92777));
+        let t = table(&[r]);
+        assert!(t.contains("| `verify_x_2` | VERIFIED | 0 of 3178 failed (37 unreachable) | 3 of 3 satisfied | 46.9 s |"), "{t}");
+    }
+
+    #[test]
+    fn a_failed_or_cut_run_is_not_reported_verified() {
+        let failed = parse("f", "VERIFICATION:- FAILED\nVerification Time: 1s\n");
+        assert_eq!(failed.verified, Some(false));
+        assert!(table(&[failed]).contains("**FAILED**"));
+        let cut = parse("c", "Checking harness c...\n");
+        assert!(table(&[cut]).contains("no result"));
+    }
+}
