@@ -184,6 +184,17 @@ fn within(a: Speed, b: Speed, allowance: Speed) -> bool {
     d <= allowance && d >= allowance.saturating_neg()
 }
 
+/// The comm-loss threshold a frame leaves in force: its own `timeout` capped by the profile's
+/// `brake_after`, the profile's without one; `None` for a zero timeout, which no frame may ask for.
+pub const fn frame_threshold(timeout: Option<u16>, brake_after: u16) -> Option<u16> {
+    match timeout {
+        None => Some(brake_after),
+        Some(0) => None,
+        Some(t) if t < brake_after => Some(t),
+        Some(_) => Some(brake_after),
+    }
+}
+
 /// Checks `cmd` against the configuration and the last valid setpoint.
 ///
 /// `allowance` is how far a velocity target may move from the last valid one on the same axis (the
@@ -220,13 +231,8 @@ pub fn validate_into<const N: usize>(
     for (out, a) in axes.iter_mut().zip(cmd.axes.iter()) {
         *out = validate_axis(a, cfg)?;
     }
-    let brake_max = cfg.params().brake_after;
-    let brake_after = match cmd.timeout {
-        None => brake_max,
-        Some(0) => return Err(RejectReason::OutOfRange),
-        Some(t) if t < brake_max => t,
-        Some(_) => brake_max,
-    };
+    let brake_after =
+        frame_threshold(cmd.timeout, cfg.params().brake_after).ok_or(RejectReason::OutOfRange)?;
     if let (Some(seq), true, true) = (cmd.seq, has_last, last.has_seq) {
         // SR-3: a repeated or older frame is refused.
         if !seq_is_newer(seq, last.seq_value) {

@@ -25,6 +25,22 @@ fn valid_ladder<const N: usize>(src: &mut impl Source) -> Option<Ladder<N>> {
     }
 }
 
+/// A valid ladder and one event (a tick half the time, otherwise any event), stepped: the state
+/// before, the event, the state after and the output.
+type Stepped<const N: usize> = (Ladder<N>, Event<N>, Ladder<N>, crate::Output<N>);
+
+fn one_step<const N: usize>(src: &mut impl Source) -> Option<Stepped<N>> {
+    let l0 = valid_ladder::<N>(src)?;
+    let e = if src.bool() {
+        Event::Tick
+    } else {
+        arbitrary::event(src)
+    };
+    let mut l = l0;
+    let out = l.step(e);
+    Some((l0, e, l, out))
+}
+
 /// INV-0 (base): the power-on state satisfies the invariant and is braked.
 pub fn initial_state_is_valid<const N: usize>(src: &mut impl Source) {
     let cfg = arbitrary::config(src);
@@ -220,16 +236,9 @@ pub fn comm_loss_age_advances<const N: usize>(src: &mut impl Source) {
 /// rung's limit only while falling; in HOLD and STOP every value falls toward zero without changing
 /// sign; in BRAKE every value is zero.
 pub fn applied_within_mode_limit<const N: usize>(src: &mut impl Source) {
-    let l0 = valid_ladder::<N>(src);
-    assume!(src, l0.is_some());
-    let Some(l0) = l0 else { return };
-    let mut l = l0;
-    let e = if src.bool() {
-        Event::Tick
-    } else {
-        arbitrary::event(src)
-    };
-    let out = l.step(e);
+    let r = one_step::<N>(src);
+    assume!(src, r.is_some());
+    let Some((l0, e, l, out)) = r else { return };
     let p = *l.config().params();
     let ticked = e == Event::Tick;
     let modes = l.axis_modes();
@@ -591,16 +600,9 @@ pub fn latching_faults_cut_pwm_in_same_step<const N: usize>(src: &mut impl Sourc
 /// `max_tick_step` (speeds, caps) or `duty_step` (duties) per tick, and only at a tick; an axis
 /// changes mode only from rest or into a passive mode.
 pub fn setpoint_step_is_bounded<const N: usize>(src: &mut impl Source) {
-    let l0 = valid_ladder::<N>(src);
-    assume!(src, l0.is_some());
-    let Some(l0) = l0 else { return };
-    let e = if src.bool() {
-        Event::Tick
-    } else {
-        arbitrary::event(src)
-    };
-    let mut l = l0;
-    let out = l.step(e);
+    let r = one_step::<N>(src);
+    assume!(src, r.is_some());
+    let Some((l0, e, l, out)) = r else { return };
     let p = *l.config().params();
     let bound = l.config().max_tick_step();
     if e != Event::Tick {
@@ -668,16 +670,9 @@ pub fn setpoint_step_is_bounded<const N: usize>(src: &mut impl Source) {
 /// INV-17, INV-15: outside BRAKE the drive each axis gets is its mode's: a passive command (coast,
 /// short) never becomes drive, and a position axis's target is within the travel.
 pub fn drive_follows_axis_modes<const N: usize>(src: &mut impl Source) {
-    let l0 = valid_ladder::<N>(src);
-    assume!(src, l0.is_some());
-    let Some(l0) = l0 else { return };
-    let e = if src.bool() {
-        Event::Tick
-    } else {
-        arbitrary::event(src)
-    };
-    let mut l = l0;
-    let out = l.step(e);
+    let r = one_step::<N>(src);
+    assume!(src, r.is_some());
+    let Some((_, e, l, out)) = r else { return };
     let p = *l.config().params();
     if let Drive::Run(axes) = out.drive {
         let wants = l.last_valid().map(|sp| sp.axes);
@@ -808,10 +803,7 @@ pub(crate) mod model {
                 .copied()
                 .unwrap_or(RejectReason::Crc))
         };
-        if kani::any()
-            || cmd.timeout == Some(0)
-            || !cmd.axes.iter().all(|a| p.modes.contains(a.mode))
-        {
+        if kani::any() || !cmd.axes.iter().all(|a| p.modes.contains(a.mode)) {
             return refuse(());
         }
         let mut axes = [AxisSetpoint::passive(AxisMode::Coast); N];
@@ -835,9 +827,8 @@ pub(crate) mod model {
                 },
             };
         }
-        let brake_after = match cmd.timeout {
-            Some(t) if t < p.brake_after => t,
-            _ => p.brake_after,
+        let Some(brake_after) = crate::validate::frame_threshold(cmd.timeout, p.brake_after) else {
+            return refuse(());
         };
         *last = Setpoint {
             axes,
