@@ -19,7 +19,6 @@ use protocol::amr::{
 use statemachine::RejectReason;
 
 type Output = statemachine::Output<AXES>;
-type Event = statemachine::Event<AXES>;
 
 /// The link task's own state: the feedback sequence, the last accepted command's sequence, and
 /// the identity it answers with.
@@ -89,11 +88,7 @@ impl LinkTask {
             self.identity_requested = true;
         }
         let before = safety.ladder().counters().valid_frames;
-        let event = match decoded.and_then(|c| c.to_command()) {
-            Ok(cmd) => Event::Frame(cmd),
-            Err(reason) => Event::Rejected(reason),
-        };
-        let out = safety.step(event);
+        let out = safety.step(protocol::event_from(decoded.and_then(|c| c.to_command())));
         if safety.ladder().counters().valid_frames != before {
             self.cmd_seq = seq;
         }

@@ -4,7 +4,7 @@
 //! here a float becomes a fixed-point target only after it is known to be finite and in its mode's range.
 
 use crate::config::Config;
-use crate::types::{AxisCommand, AxisMode, Command, Duty, Position, RejectReason, Speed};
+use crate::types::{AxisCommand, AxisMode, Command, RejectReason, Speed};
 
 /// One axis of a command that passed validation.
 ///
@@ -73,11 +73,6 @@ impl<const N: usize> Setpoint<N> {
             None
         }
     }
-
-    /// True if applying this setpoint would put drive torque on axis `i` (enabled, not passive).
-    pub fn drives(&self, i: usize) -> bool {
-        self.enable && self.axes.get(i).is_some_and(|a| !a.mode.is_passive())
-    }
 }
 
 /// Sequence numbers are compared in serial-number arithmetic (RFC 1982 style): `seq` is newer than
@@ -128,9 +123,6 @@ fn validate_axis(a: &AxisCommand, cfg: &Config) -> Result<AxisSetpoint, RejectRe
         cap,
     })
 }
-
-/// The type of [`Position`] and [`Duty`] targets is [`Speed`]'s (Q16.16); the aliases name the unit.
-const _: (Position, Duty) = (Speed::ZERO, Speed::ZERO);
 
 /// A finite `f32` as Q16.16, rounded to the nearest step with ties to even (what
 /// `Speed::checked_from_num` does), or `None` if |x| ≥ 2¹⁵ (the one in-range value this refuses,
