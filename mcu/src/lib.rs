@@ -29,13 +29,19 @@
     )
 )]
 
+#[cfg(test)]
+extern crate std;
+
 pub mod boot;
+pub mod cdc;
 pub mod current;
 pub mod estop;
 pub mod hw;
 pub mod link;
 pub mod safety;
+pub mod serial;
 pub mod speed;
+pub mod teensy;
 pub mod tick;
 pub mod timing;
 pub mod trace;

@@ -4,11 +4,7 @@
 
 use crate::trace::{Record, Trace};
 use crate::AXES;
-use statemachine::{Config, FaultFlags, Mode};
-
-type Ladder = statemachine::Ladder<AXES>;
-type Event = statemachine::Event<AXES>;
-type Output = statemachine::Output<AXES>;
+use statemachine::{Config, Event, FaultFlags, Ladder, Mode, Output};
 
 /// What the trace compares across one ladder step.
 #[derive(Clone, Copy)]
@@ -20,7 +16,7 @@ struct Marks {
 }
 
 impl Marks {
-    fn of(l: &Ladder) -> Self {
+    fn of<const N: usize>(l: &Ladder<N>) -> Self {
         let c = l.counters();
         Self {
             mode: l.mode(),
@@ -31,15 +27,16 @@ impl Marks {
     }
 }
 
-/// Ladder, tick count and trace.
+/// Ladder, tick count and trace, over the board's `N` axes (the seed 000 board's [`AXES`] unless
+/// named: 4 for the seed 001 and seed 003 boards).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub struct Safety {
-    ladder: Ladder,
+pub struct Safety<const N: usize = AXES> {
+    ladder: Ladder<N>,
     ticks: u32,
     trace: Trace,
 }
 
-impl Safety {
+impl<const N: usize> Safety<N> {
     /// Power-on state: BRAKE latched until the host arms (see [`Ladder::new`]).
     pub const fn new(cfg: Config) -> Self {
         Self {
@@ -51,7 +48,7 @@ impl Safety {
 
     /// The board's safety core around an existing ladder state: for proofs that start from any
     /// state satisfying [`Ladder::is_valid`] (an over-approximation of the reachable states).
-    pub const fn from_ladder(ladder: Ladder) -> Self {
+    pub const fn from_ladder(ladder: Ladder<N>) -> Self {
         Self {
             ladder,
             ticks: 0,
@@ -60,14 +57,14 @@ impl Safety {
     }
 
     /// Feeds one event to the ladder and records what changed.
-    pub fn step(&mut self, event: Event) -> Output {
+    pub fn step(&mut self, event: Event<N>) -> Output<N> {
         self.apply(event);
         self.ladder.output()
     }
 
     /// Steps the ladder and records what changed, without building its output: for the events the
     /// tick applies before the tick itself (ESTOP input, board conditions).
-    pub fn apply(&mut self, event: Event) {
+    pub fn apply(&mut self, event: Event<N>) {
         // Only what the trace compares is kept from before the step (not a copy of the ladder:
         // this runs for every received frame).
         let before = Marks::of(&self.ladder);
@@ -76,7 +73,7 @@ impl Safety {
     }
 
     /// One watchdog tick: counts it, then steps the ladder.
-    pub(crate) fn tick(&mut self) -> Output {
+    pub(crate) fn tick(&mut self) -> Output<N> {
         self.ticks = self.ticks.wrapping_add(1);
         self.step(Event::Tick)
     }
@@ -110,12 +107,12 @@ impl Safety {
     }
 
     /// The ladder (read only: events go through [`Safety::step`]).
-    pub const fn ladder(&self) -> &Ladder {
+    pub const fn ladder(&self) -> &Ladder<N> {
         &self.ladder
     }
 
     /// The ladder's current output.
-    pub fn output(&self) -> Output {
+    pub fn output(&self) -> Output<N> {
         self.ladder.output()
     }
 
