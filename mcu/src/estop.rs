@@ -33,8 +33,15 @@ impl EstopInput {
     /// The edge handler: `pressed` is the input's level after the edge. A press brakes the bridge
     /// at once, before any other task runs. Returns true for a press.
     pub fn edge(&mut self, bridge: &mut impl Bridge, pressed: bool) -> bool {
+        self.edge_then(pressed, || bridge.apply(BridgeState::Brake))
+    }
+
+    /// [`EstopInput::edge`] for a board whose outputs are not the two H-bridges: `stop` is what
+    /// takes them to their safe state at once (the seed 001 motors shorted, the seed 003 steppers
+    /// halted); it runs only on a press.
+    pub fn edge_then(&mut self, pressed: bool, stop: impl FnOnce()) -> bool {
         if pressed {
-            bridge.apply(BridgeState::Brake);
+            stop();
             self.pressed_since_poll = true;
         }
         pressed

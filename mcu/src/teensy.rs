@@ -241,17 +241,18 @@ pub enum StepPulse {
     Backward,
 }
 
-/// `step_gen` (priority 3, [`STEP_HZ`]): the motor's step count, moved at most one step per run
-/// toward the tick's target.
+/// `step_gen` (priority 3, [`STEP_HZ`]): the motors' step counts, each moved at most one step per
+/// run toward its target (set by the tick from [`Joints::step_targets`]).
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub struct StepGen {
     at: [i32; JOINTS],
+    target: [i32; JOINTS],
 }
 
 impl StepGen {
-    /// Motors standing at `at` steps.
+    /// Motors standing at `at` steps, holding there.
     pub const fn new(at: [i32; JOINTS]) -> Self {
-        Self { at }
+        Self { at, target: at }
     }
 
     /// The steps issued so far, per joint.
@@ -259,10 +260,21 @@ impl StepGen {
         self.at
     }
 
-    /// One run: a pulse per joint that is not at its target.
-    pub fn run(&mut self, target: &[i32; JOINTS]) -> [StepPulse; JOINTS] {
+    /// The targets the next runs move toward.
+    pub fn set_target(&mut self, target: [i32; JOINTS]) {
+        self.target = target;
+    }
+
+    /// Stops at once where the motors stand (ESTOP press, BRAKE): no further pulse.
+    pub fn halt(&mut self) {
+        self.target = self.at;
+    }
+
+    /// One run: a pulse per joint that is not at its target. Not inlined, for the budget report.
+    #[inline(never)]
+    pub fn run(&mut self) -> [StepPulse; JOINTS] {
         let mut out = [StepPulse::Idle; JOINTS];
-        for ((o, at), t) in out.iter_mut().zip(self.at.iter_mut()).zip(target) {
+        for ((o, at), t) in out.iter_mut().zip(self.at.iter_mut()).zip(&self.target) {
             if *t > *at {
                 *at = at.saturating_add(1);
                 *o = StepPulse::Forward;

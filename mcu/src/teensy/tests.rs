@@ -153,7 +153,8 @@ fn steps_follow_the_reference_one_per_run() {
     );
     assert_eq!(steps_of(Position::from_num(-core::f64::consts::PI)), -800);
     let mut g = StepGen::new([0, 0, 5, 0]);
-    let p = g.run(&[2, -1, 5, 0]);
+    g.set_target([2, -1, 5, 0]);
+    let p = g.run();
     assert_eq!(
         p,
         [
@@ -163,8 +164,18 @@ fn steps_follow_the_reference_one_per_run() {
             StepPulse::Idle
         ]
     );
-    g.run(&[2, -1, 5, 0]);
+    g.run();
     assert_eq!(g.position(), [2, -1, 5, 0]);
+    assert_eq!(
+        g.run(),
+        [StepPulse::Idle; JOINTS],
+        "at the target: no pulse"
+    );
+    g.set_target([100; JOINTS]);
+    g.run();
+    g.halt();
+    assert_eq!(g.run(), [StepPulse::Idle; JOINTS], "halted: no pulse");
+    assert_eq!(g.position(), [3, 0, 6, 1]);
 }
 
 #[test]
