@@ -9,8 +9,8 @@ set -euo pipefail
 cd "$(dirname "$0")/../.."
 cargo fw
 cargo build -p firmware --release --target thumbv7em-none-eabihf --features qemu --target-dir target/qemu
-board="$PWD/target/thumbv7em-none-eabihf/release/firmware"
-emu="$PWD/target/qemu/thumbv7em-none-eabihf/release/firmware"
+board="$PWD/target/thumbv7em-none-eabihf/release/amr-spi"
+emu="$PWD/target/qemu/thumbv7em-none-eabihf/release/amr-spi"
 work="$(mktemp -d)"
 qpid=""
 cleanup() {

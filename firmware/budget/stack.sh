@@ -12,4 +12,4 @@ set -euo pipefail
 cd "$(dirname "$0")/../.."
 RUSTC_BOOTSTRAP=1 RUSTFLAGS="-Z emit-stack-sizes" \
   cargo build -q -p firmware --release --target thumbv7em-none-eabihf --target-dir target/stack >&2
-python3 firmware/budget/stack.py target/stack/thumbv7em-none-eabihf/release/firmware
+python3 firmware/budget/stack.py target/stack/thumbv7em-none-eabihf/release/amr-spi

@@ -7,7 +7,7 @@
 set -euo pipefail
 cd "$(dirname "$0")/../.."
 cargo build -p firmware --release --target thumbv7em-none-eabihf --features qemu --target-dir target/qemu
-elf="$PWD/target/qemu/thumbv7em-none-eabihf/release/firmware"
+elf="$PWD/target/qemu/thumbv7em-none-eabihf/release/amr-spi"
 work="$(mktemp -d)"
 trap 'rm -rf "$work"' EXIT
 python3 firmware/qemu/make_frames.py "$work/frames.bin"

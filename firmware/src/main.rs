@@ -1,6 +1,6 @@
-//! Motor-controller firmware for the STM32F407: the RTIC shell around the board application
-//! (crate `mcu`). Each task binds its interrupt to one `mcu` body and moves values between the
-//! registers (modules in `board/`) and that body; the simulator runs the same bodies.
+//! The `amr-spi` image (seed 000): the RTIC shell around the seed 000 board application (crate
+//! `mcu`). Each task binds its interrupt to one `mcu` body and moves values between the registers
+//! (the `firmware` library's `board` modules) and that body; the simulator runs the same bodies.
 //!
 //! ```text
 //!  priority 5  estop_input    EXTI4 (PD4, both edges)  mcu::EstopInput::edge     bridge braked in the handler
@@ -19,19 +19,11 @@
 #![no_main]
 #![deny(unsafe_code)]
 
-mod board;
-mod panic;
-
-/// Build identity from `build.rs`: commit, dirty flag, date.
-mod build {
-    include!(concat!(env!("OUT_DIR"), "/identity.rs"));
-}
-
-use defmt_rtt as _;
+use firmware as _;
 
 #[rtic::app(device = stm32f4xx_hal::pac, peripherals = true)]
 mod app {
-    use crate::board::{
+    use firmware::board::{
         self, hooks, Board, Bridge, CurrentSense, Encoders, EstopPin, LinkHw, NssPin, Periodic,
         TickClock, FRAME_LEN, TUNING,
     };
@@ -88,7 +80,7 @@ mod app {
         tx_buf: [[u8; FRAME_LEN]; 2] = [[0; FRAME_LEN]; 2],
     ])]
     fn init(cx: init::Context) -> (Shared, Local) {
-        let boot = crate::panic::boot(&cx.device.RCC);
+        let boot = firmware::panic::boot(&cx.device.RCC);
         let (b, iwdg, dbg) = board::init(cx.device, cx.local.rx_buf, cx.local.tx_buf);
         let Board {
             bridge,

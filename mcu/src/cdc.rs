@@ -14,12 +14,21 @@
 //! | received        | ladder event ([`protocol::cdc::Message::to_event`])   | reply                     |
 //! |-----------------|--------------------------------------------------------|---------------------------|
 //! | `SET_MOTOR_PWM` | four duty/coast axes, `timeout_ms` as the comm-loss threshold | none (the seed: no ACK for the 50 Hz frame) |
-//! | `MOTOR_ENABLE 1`| `Rearm(Primary)`: BRAKE is left only with no latching cause | `ACK(0x02, 0)` if armed, else `ACK(0x02, 1)` |
-//! | `MOTOR_ENABLE 0`| a frame of four coasting axes with enable 0 (STOP)     | `ACK(0x02, 0)` / `(0x02, 1)` |
+//! | `MOTOR_ENABLE 1`| a frame of four coasting axes with enable 0, then `Rearm(Primary)`; the following `SET_MOTOR_PWM` frames drive | `ACK(0x02, 0)` if the re-arm was taken, else `ACK(0x02, 1)` |
+//! | `MOTOR_ENABLE 0`| a frame of four coasting axes with enable 0 (STOP); until `MOTOR_ENABLE 1`, `SET_MOTOR_PWM` frames keep the link alive with every motor at 0 (the seed: outputs forced to 0) | `ACK(0x02, 0)` / `(0x02, 1)` |
 //! | `ESTOP 1`       | `Estop(Primary, Engage)`: BRAKE latched at once          | `ACK(0x03, 0)`            |
 //! | `ESTOP 0`       | `Estop(Primary, Release)`: releases the link's own ESTOP; the drive stays braked until `MOTOR_ENABLE 1` | `ACK(0x03, 0)`, or `(0x03, 1)` if refused |
 //! | `PING`          | none                                                   | a `STATUS` at once        |
 //! | a refused frame, or a message only the MCU sends | `Rejected(reason)` (counted; nothing else changes) | reported in the next STATUS `err` |
+//!
+//! Why `MOTOR_ENABLE 1` carries a coasting frame: the ladder leaves BRAKE at a tick after the
+//! re-arm only with a valid enabled frame since the previous tick, and while no frame arrives its
+//! comm-loss check re-latches BRAKE every tick, which withdraws a pending re-arm. The host sends
+//! `MOTOR_ENABLE 1`, waits for the ACK, then starts its 50 Hz frames: the coasting frame (a valid
+//! frame, every motor at 0) restarts the link's age, so the re-arm waits for the first
+//! `SET_MOTOR_PWM` for up to the profile's BRAKE threshold (249 ms), and no longer: a re-arm is
+//! never kept for a later session. The enable 0 → 1 edge between that frame and the first
+//! `SET_MOTOR_PWM` is the ladder's explicit re-arm as well (SR-8).
 //!
 //! ACK `result`: [`ACK_OK`] when the event took effect, [`ACK_REFUSED`] when the safety core
 //! refused it (a latching cause still active, an ESTOP owned by another source, an invalid frame).
@@ -38,7 +47,9 @@ use crate::serial::TxQueue;
 use protocol::cdc::{
     self, Ack, ErrorCode, Imu, Message, MsgId, Status, StatusFlags, StreamDecoder,
 };
-use statemachine::{AxisDrive, Drive, FaultFlags, Mode, Output, Source};
+use statemachine::{
+    AxisCommand, AxisDrive, Command, Drive, Event, FaultFlags, Mode, Output, Source,
+};
 
 /// Motors of the seed 001 board (TIM8 CH1 … CH4).
 pub const MOTORS: usize = 4;
@@ -71,6 +82,7 @@ pub struct CdcLinkTask {
     pub tx: TxQueue<TX_CAP>,
     last_error: Option<ErrorCode>,
     status_due: u32,
+    enabled: bool,
 }
 
 impl Default for CdcLinkTask {
@@ -87,6 +99,7 @@ impl CdcLinkTask {
             tx: TxQueue::new(),
             last_error: None,
             status_due: 0,
+            enabled: false,
         }
     }
 
@@ -110,7 +123,18 @@ impl CdcLinkTask {
                 self.send_status(safety, st);
                 None
             }
-            Ok(m @ (Message::MotorEnable(_) | Message::Estop(_))) => {
+            Ok(m @ Message::MotorEnable(on)) => {
+                self.enabled = on;
+                let before = *safety.ladder().counters();
+                let mut out = safety.step(Event::Frame(coasting(None)));
+                if on {
+                    out = safety.step(Event::Rearm(Source::Primary));
+                }
+                let ok = took_effect(&m, safety, &before);
+                self.ack(m.id(), ok);
+                Some(out)
+            }
+            Ok(m @ Message::Estop(_)) => {
                 let event = m.to_event()?;
                 let before = *safety.ladder().counters();
                 let out = safety.step(event);
@@ -118,7 +142,15 @@ impl CdcLinkTask {
                 self.ack(m.id(), ok);
                 Some(out)
             }
-            Ok(m @ Message::SetMotorPwm(_)) => m.to_event().map(|e| safety.step(e)),
+            Ok(Message::SetMotorPwm(p)) => {
+                let cmd = p.to_command();
+                let cmd = if self.enabled {
+                    cmd
+                } else {
+                    coasting(cmd.timeout)
+                };
+                Some(safety.step(Event::Frame(cmd)))
+            }
             // Messages only the MCU sends: a host that sends them is confused.
             Ok(Message::Ack(_) | Message::Imu(_) | Message::Status(_)) => {
                 Some(self.refuse(safety, cdc::Error::UnknownMsg))
@@ -129,7 +161,7 @@ impl CdcLinkTask {
     /// A refused frame: counted by the ladder, reported by the next STATUS.
     fn refuse(&mut self, safety: &mut Safety<MOTORS>, e: cdc::Error) -> Output<MOTORS> {
         self.last_error = Some(e.error_code());
-        safety.step(statemachine::Event::Rejected(e.reason()))
+        safety.step(Event::Rejected(e.reason()))
     }
 
     fn ack(&mut self, id: MsgId, ok: bool) {
@@ -151,7 +183,7 @@ impl CdcLinkTask {
         let l = safety.ladder();
         let faults = l.faults();
         let mut flags = 0;
-        if l.mode() != Mode::Brake && l.last_valid().is_some_and(|s| s.enable) {
+        if self.enabled && l.mode() != Mode::Brake {
             flags |= StatusFlags::MOTOR_ENABLED;
         }
         if faults.contains(FaultFlags::ESTOP) {
@@ -198,6 +230,15 @@ impl CdcLinkTask {
     }
 }
 
+/// Every motor coasting, enable 0: what the board applies while disabled (the seed's outputs
+/// forced to 0), with the frame's comm-loss threshold.
+fn coasting(timeout: Option<u16>) -> Command<MOTORS> {
+    Command {
+        timeout,
+        ..Command::uniform(AxisCommand::COAST, false, None)
+    }
+}
+
 /// Whether `MOTOR_ENABLE` or `ESTOP` took effect, from the ladder after the step.
 fn took_effect(m: &Message, safety: &Safety<MOTORS>, before: &statemachine::Counters) -> bool {
     let l = safety.ladder();
@@ -207,6 +248,8 @@ fn took_effect(m: &Message, safety: &Safety<MOTORS>, before: &statemachine::Coun
         // there was nothing to re-arm: refused only when the ladder counted a refusal.
         Message::MotorEnable(true) => l.counters().rearm_refused == before.rearm_refused,
         Message::MotorEnable(false) => l.counters().valid_frames != before.valid_frames,
+        // (`MOTOR_ENABLE 1` also needs its coasting frame taken, which the ladder always does:
+        // it is valid in every state.)
         Message::Estop(statemachine::Estop::Engage) => l.estop_owners() & primary != 0,
         Message::Estop(statemachine::Estop::Release) => l.estop_owners() & primary == 0,
         _ => false,

@@ -14,7 +14,7 @@
 //! |----------------|-------------------------------------------------------------------------------------|---------------------------|
 //! | `MTRS`         | a frame of position axes: every joint to its angle (deg → rad) under `mtr_speed_deg_s` as the speed cap | 1 if the ladder accepted it |
 //! | `MTRS`, `is_relative` ≠ 0 | refused (`Rejected(Decode)`): a relative move repeated after a lost echo would move twice; the host sends absolute angles | 0 |
-//! | `CAL`          | `Rearm(Primary)`: the explicit re-arm (the seed has no enable message); the arm leaves BRAKE at the next tick after a fresh `MTRS` | 1 unless the ladder refused the re-arm |
+//! | `CAL`          | a frame of coasting joints with enable 0, then `Rearm(Primary)`: the explicit re-arm (the seed has no enable message); the arm leaves BRAKE at the tick after the first `MTRS` that follows within the profile's BRAKE threshold (as `MOTOR_ENABLE 1` of seed 001, `mcu::cdc`) | 1 unless the ladder refused the re-arm |
 //! | `ENDEFF_ON/OFF`| the end-effector output (kept through BRAKE: dropping a held part is not safer)      | 1                         |
 //! | `CONFIG`       | the joints' acceleration (`mtr_accel_deg_s_s`), within (0, the profile's limit]      | 1 if within, else 0 (nothing changed) |
 //! | a refused frame| `Rejected(reason)` (counted; nothing else changes); no echo (the bytes are not a command) | — |
@@ -33,7 +33,8 @@ use crate::serial::TxQueue;
 use control::profile::{ProfileLimits, Trapezoid, Travel};
 use protocol::teensy::{CmdMsg, CmdType, RobustDecoder};
 use statemachine::{
-    AxisDrive, Config, Drive, Event, Output, Position, RejectReason, Source, Speed,
+    AxisCommand, AxisDrive, Command, Config, Drive, Event, Output, Position, RejectReason, Source,
+    Speed,
 };
 
 /// Joints of the seed 003 arm on this board (`MAX_SUPPORTED_MTRS`).
@@ -121,6 +122,8 @@ impl TeensyLinkTask {
                 (out, ok, BoardAction::None)
             }
             CmdType::Cal => {
+                let coast = Command::uniform(AxisCommand::COAST, false, None);
+                safety.step(Event::Frame(coast));
                 let out = safety.step(Event::Rearm(Source::Primary));
                 let ok = safety.ladder().counters().rearm_refused == before.rearm_refused;
                 (out, ok, BoardAction::None)

@@ -44,6 +44,7 @@
 #![allow(unsafe_code)]
 
 pub mod bridge;
+pub mod cdc;
 #[cfg(not(feature = "qemu"))]
 mod clock;
 #[cfg(feature = "qemu")]
@@ -52,7 +53,10 @@ pub mod emu;
 pub mod link;
 mod regs;
 pub mod sense;
+pub mod teensy;
 pub mod timers;
+pub mod trace;
+pub mod uart;
 
 pub use bridge::Bridge;
 pub use sense::{CurrentSense, Encoders};
@@ -114,6 +118,12 @@ pub const APB1_TIMER_HZ: u32 = 84_000_000;
 pub const APB1_TIMER_HZ: u32 = 16_000_000;
 /// Timer clock of APB2 timers (TIM1, TIM8).
 pub const APB2_TIMER_HZ: u32 = SYSCLK_HZ;
+/// APB2 peripheral clock (USART1, ADC).
+#[cfg(not(feature = "qemu"))]
+pub const PCLK2_HZ: u32 = 84_000_000;
+/// APB2 peripheral clock at reset.
+#[cfg(feature = "qemu")]
+pub const PCLK2_HZ: u32 = 16_000_000;
 
 /// PWM frequency and current-loop rate, Hz.
 pub const PWM_HZ: u32 = TUNING.pwm_hz;
@@ -210,6 +220,20 @@ impl NssPin {
 pub struct EstopPin(stm32f4xx_hal::gpio::PD4<stm32f4xx_hal::gpio::Input>);
 
 impl EstopPin {
+    /// PD4 as the ESTOP input: pull-up, interrupt on both edges (every board has it).
+    pub fn new(
+        pin: stm32f4xx_hal::gpio::PD4,
+        syscfg: &mut stm32f4xx_hal::syscfg::SysCfg,
+        exti: &mut pac::EXTI,
+    ) -> Self {
+        use stm32f4xx_hal::gpio::{Edge, ExtiPin};
+        let mut estop = pin.into_pull_up_input();
+        estop.make_interrupt_source(syscfg);
+        estop.trigger_on_edge(exti, Edge::RisingFalling);
+        estop.enable_interrupt(exti);
+        Self(estop)
+    }
+
     /// True while pressed (or the loop is open).
     pub fn pressed(&self) -> bool {
         self.0.is_high()
@@ -244,6 +268,31 @@ pub struct Board {
     pub pins: Pins,
 }
 
+/// The clock tree of every image: HSE 8 MHz → PLL → 168 MHz, APB1 42 MHz, APB2 84 MHz, with the
+/// clock security system on (board); left at reset (HSI 16 MHz) under the emulator, whose RCC is
+/// not modelled.
+pub fn clocks(rcc: pac::RCC) -> stm32f4xx_hal::rcc::Rcc {
+    use stm32f4xx_hal::prelude::*;
+    use stm32f4xx_hal::rcc::Config;
+    #[cfg(not(feature = "qemu"))]
+    {
+        let rcc = rcc.freeze(
+            Config::hse(8.MHz())
+                .sysclk(SYSCLK_HZ.Hz())
+                .hclk(SYSCLK_HZ.Hz())
+                .pclk1(42.MHz())
+                .pclk2(84.MHz()),
+        );
+        clock::enable_css(&rcc);
+        rcc
+    }
+    #[cfg(feature = "qemu")]
+    {
+        let _ = Config::hsi();
+        rcc.constrain()
+    }
+}
+
 /// Brings up clocks, pins and peripherals with the bridge braked. The gate driver stays disabled
 /// while the pins are configured and is enabled last, once both timers hold their outputs forced
 /// inactive: BRAKE itself (low sides on) needs a powered gate driver.
@@ -254,23 +303,8 @@ pub fn init(
 ) -> (Board, pac::IWDG, pac::DBGMCU) {
     use stm32f4xx_hal::gpio::{Edge, ExtiPin};
     use stm32f4xx_hal::prelude::*;
-    use stm32f4xx_hal::rcc::Config;
 
-    #[cfg(not(feature = "qemu"))]
-    let mut rcc = dp.RCC.freeze(
-        Config::hse(8.MHz())
-            .sysclk(SYSCLK_HZ.Hz())
-            .hclk(SYSCLK_HZ.Hz())
-            .pclk1(42.MHz())
-            .pclk2(84.MHz()),
-    );
-    #[cfg(not(feature = "qemu"))]
-    clock::enable_css(&rcc);
-    #[cfg(feature = "qemu")]
-    let mut rcc = {
-        let _ = Config::hsi();
-        dp.RCC.constrain()
-    };
+    let mut rcc = clocks(dp.RCC);
 
     let gpioa = dp.GPIOA.split(&mut rcc);
     let gpiob = dp.GPIOB.split(&mut rcc);
@@ -287,10 +321,7 @@ pub fn init(
     let n_otw = gpiod.pd3.into_pull_up_input();
     let mut syscfg = dp.SYSCFG.constrain(&mut rcc);
     let mut exti = dp.EXTI;
-    let mut estop = gpiod.pd4.into_pull_up_input();
-    estop.make_interrupt_source(&mut syscfg);
-    estop.trigger_on_edge(&mut exti, Edge::RisingFalling);
-    estop.enable_interrupt(&mut exti);
+    let estop = EstopPin::new(gpiod.pd4, &mut syscfg, &mut exti);
     // NSS stays in its SPI function; the EXTI still sees its level.
     let mut nss = gpiob.pb12.into_alternate::<5>();
     nss.make_interrupt_source(&mut syscfg);
@@ -343,7 +374,7 @@ pub fn init(
             encoders,
             adc,
             link,
-            estop: EstopPin(estop),
+            estop,
             nss: NssPin(nss),
             tick,
             speed,

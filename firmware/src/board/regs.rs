@@ -52,3 +52,12 @@ pub(crate) const SMCR_TRIGGER_ITR0: u32 = 0b110; // SMS = trigger mode, TS = 000
 pub(crate) const fn ccmr1(ocm: u32) -> u32 {
     (ocm << 4) | OCPE | (ocm << 12) | (OCPE << 8)
 }
+
+/// Read-modify-write of a 16-bit register: clears `clear`, then sets `set`.
+pub(crate) fn rmw16<REG>(reg: &stm32f4::Reg<REG>, clear: u16, set: u16)
+where
+    REG: stm32f4::RegisterSpec<Ux = u16> + stm32f4::Writable + stm32f4::Readable,
+{
+    // SAFETY: as for `wr`: only documented bits of the register change.
+    reg.modify(|r, w| unsafe { w.bits((r.bits() & !clear) | set) });
+}

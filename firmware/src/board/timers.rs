@@ -38,6 +38,7 @@ macro_rules! periodic {
 }
 periodic!(TIM2, TICK_DIV);
 periodic!(TIM5, SPEED_DIV);
+periodic!(TIM3, super::cdc::IMU_DIV);
 
 /// The independent watchdog: once started it cannot be stopped; a missing refresh resets the MCU.
 pub struct Iwdg {

@@ -328,3 +328,71 @@ fn imu_units_follow_the_datasheet_and_saturation_is_flagged() {
     assert!(sat);
     assert_eq!(imu.gyro_mdps[0], i16::MAX);
 }
+
+#[test]
+fn an_enable_acked_before_the_first_frame_still_rearms() {
+    // The host's order: MOTOR_ENABLE 1, wait for the ACK, then the 50 Hz frames. Ticks pass in
+    // between, during which the ladder's comm-loss check keeps re-latching BRAKE.
+    let (mut l, mut s) = board();
+    for _ in 0..300 {
+        crate::serial::tick(&mut s, &Default::default());
+    }
+    send(&mut l, &mut s, &Message::MotorEnable(true));
+    assert_eq!(replies(&mut l), [ack(MsgId::MotorEnable, ACK_OK)]);
+    for _ in 0..30 {
+        crate::serial::tick(&mut s, &Default::default());
+    }
+    send(&mut l, &mut s, &pwm([300; 4], 200));
+    let out = crate::serial::tick(&mut s, &Default::default());
+    assert_eq!(
+        out.mode,
+        Mode::Reduced,
+        "armed by the enable 30 ms before the first frame"
+    );
+    // But not for ever: an enable not followed by a frame within the BRAKE threshold lapses.
+    let (mut l, mut s) = board();
+    send(&mut l, &mut s, &Message::MotorEnable(true));
+    for _ in 0..400 {
+        crate::serial::tick(&mut s, &Default::default());
+    }
+    send(&mut l, &mut s, &pwm([300; 4], 200));
+    let out = crate::serial::tick(&mut s, &Default::default());
+    assert_eq!(out.mode, Mode::Brake, "a re-arm 400 ms old has lapsed");
+}
+
+#[test]
+fn disabled_frames_keep_the_link_alive_with_every_motor_at_zero() {
+    let (mut l, mut s) = board();
+    send(&mut l, &mut s, &Message::MotorEnable(true));
+    send(&mut l, &mut s, &pwm([300; 4], 200));
+    crate::serial::tick(&mut s, &Default::default());
+    send(&mut l, &mut s, &Message::MotorEnable(false));
+    let mut out = s.output();
+    for t in 0..500 {
+        if t % 20 == 0 {
+            send(&mut l, &mut s, &pwm([800; 4], 200));
+        }
+        out = crate::serial::tick(&mut s, &Default::default());
+    }
+    assert_eq!(
+        out.mode,
+        Mode::Stop,
+        "disabled: STOP, not BRAKE (the frames keep coming)"
+    );
+    assert_eq!(motor_outputs(&out.drive, 1000), [MotorOutput::COAST; 4]);
+    replies(&mut l);
+    l.send_status(&s, &ST);
+    let [Message::Status(st)] = replies(&mut l)[..] else {
+        std::panic!("one STATUS");
+    };
+    assert!(!st.flags.has(StatusFlags::MOTOR_ENABLED));
+    // Enabled again: the frames drive.
+    send(&mut l, &mut s, &Message::MotorEnable(true));
+    for t in 0..100 {
+        if t % 20 == 0 {
+            send(&mut l, &mut s, &pwm([800; 4], 200));
+        }
+        out = crate::serial::tick(&mut s, &Default::default());
+    }
+    assert_ne!(motor_outputs(&out.drive, 1000)[0], MotorOutput::COAST);
+}

@@ -192,3 +192,31 @@ fn config_sets_the_acceleration_within_the_profile() {
         "52 rad/s² is above the profile's 50"
     );
 }
+
+#[test]
+fn a_cal_before_the_first_move_still_rearms_within_the_threshold() {
+    let (mut l, mut s, _) = board();
+    for _ in 0..300 {
+        crate::serial::tick(&mut s, &Default::default());
+    }
+    send(&mut l, &mut s, &cmd(CmdType::Cal));
+    for _ in 0..40 {
+        crate::serial::tick(&mut s, &Default::default());
+    }
+    send(&mut l, &mut s, &mtrs([10; JOINTS], 90));
+    let out = crate::serial::tick(&mut s, &Default::default());
+    assert_ne!(
+        out.mode,
+        Mode::Brake,
+        "armed by the CAL 40 ms before the first MTRS"
+    );
+    // Without CAL a comm-loss BRAKE stays.
+    for _ in 0..300 {
+        crate::serial::tick(&mut s, &Default::default());
+    }
+    send(&mut l, &mut s, &mtrs([10; JOINTS], 90));
+    assert_eq!(
+        crate::serial::tick(&mut s, &Default::default()).mode,
+        Mode::Brake
+    );
+}
