@@ -1,10 +1,15 @@
 //! Project chores: `cargo xtask <command>`.
 //!
+//! `qemu-e2e <cdc|teensy>`: boots the profile's emulator image in QEMU with its link on a pty and
+//! drives it with the real `motorlink`, checking the firmware's own trace (see `e2e`).
+//!
 //! `kani-table <dir>`: reads the per-harness result files that `cargo kani -Z unstable-options
 //! --output-into-files` writes (one file per harness, named by its path) and prints the Markdown
 //! table of `proofs/REPORT.md`: harness, result, checks, covers, verification time, one row per
 //! harness in name order, so the report's figures come from a run, not from typing.
 #![forbid(unsafe_code)]
+
+mod e2e;
 
 use std::fmt::Write as _;
 use std::path::Path;
@@ -114,8 +119,25 @@ fn main() -> ExitCode {
                 ExitCode::FAILURE
             }
         },
+        ["qemu-e2e", profile] => {
+            let root = Path::new(env!("CARGO_MANIFEST_DIR"))
+                .parent()
+                .unwrap_or(Path::new("."));
+            match e2e::run(root, profile) {
+                Ok(summary) => {
+                    println!("{summary}");
+                    ExitCode::SUCCESS
+                }
+                Err(e) => {
+                    eprintln!("xtask qemu-e2e {profile}: FAILED: {e}");
+                    ExitCode::FAILURE
+                }
+            }
+        }
         _ => {
-            eprintln!("usage: cargo xtask kani-table <dir of `--output-into-files` results>");
+            eprintln!(
+                "usage: cargo xtask kani-table <dir of `--output-into-files` results>\n       cargo xtask qemu-e2e <cdc|teensy>"
+            );
             ExitCode::FAILURE
         }
     }

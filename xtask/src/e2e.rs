@@ -1,0 +1,509 @@
+//! `cargo xtask qemu-e2e <cdc|teensy>`: the real host against the real firmware. Boots the
+//! profile's emulator image (`--features qemu`) in QEMU `netduinoplus2` with USART1 on a pty, drives
+//! it with the release `motorlink` binary over that pty (one process per step, as a user would),
+//! and checks every step against the firmware's own trace (`firmware/src/board/trace.rs`: one
+//! line per tick on which something but the age changed, ticks in emulated milliseconds).
+//!
+//! The last check is the safety one: after the host stops, BRAKE comes within the profile's bound
+//! of the last valid frame, counted in the firmware's ticks.
+
+// A host-side test driver: an index out of range or an overflow here is a failed test run, never
+// a board's behaviour.
+#![allow(clippy::indexing_slicing, clippy::arithmetic_side_effects)]
+
+use std::io::{BufRead, BufReader};
+use std::path::{Path, PathBuf};
+use std::process::{Child, Command, Stdio};
+use std::sync::{Arc, Mutex};
+use std::time::{Duration, Instant};
+
+/// One trace line.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct Line {
+    /// Emulated 1 ms ticks since boot.
+    pub tick: u32,
+    /// The rung (`Normal`, `Reduced`, `Hold`, `Stop`, `Brake`).
+    pub mode: String,
+    /// Ticks since the last valid frame.
+    pub age: u32,
+    /// The drive is BRAKE.
+    pub brake: bool,
+    /// Valid frames so far.
+    pub valid: u32,
+    /// Refused frames so far.
+    pub rejected: u32,
+    /// Refused re-arms and ESTOP releases so far.
+    pub refusals: u32,
+    /// ESTOP owners (bit 0 the board's input, bit 1 the link).
+    pub owners: u8,
+    /// One token per motor: `+n`/`-n`, `C`, `S`.
+    pub out: Vec<String>,
+}
+
+/// Parses a trace line; `None` for anything else QEMU prints.
+pub fn parse(line: &str) -> Option<Line> {
+    let rest = line.trim().strip_prefix("tick=")?;
+    let (head, out) = rest.split_once(" out=")?;
+    let mut fields = head.split(' ');
+    let tick = fields.next()?.parse().ok()?;
+    let mut get = |key: &str| -> Option<String> {
+        let f = fields.next()?;
+        f.strip_prefix(key)?.strip_prefix('=').map(str::to_string)
+    };
+    Some(Line {
+        tick,
+        mode: get("mode")?,
+        age: get("age")?.parse().ok()?,
+        brake: get("drive")? == "BRAKE",
+        valid: get("valid")?.parse().ok()?,
+        rejected: get("rejected")?.parse().ok()?,
+        refusals: get("refusals")?.parse().ok()?,
+        owners: get("owners")?.parse().ok()?,
+        out: out.split(' ').map(str::to_string).collect(),
+    })
+}
+
+/// The BRAKE after the host stopped: the tick of the last line whose valid-frame count rose
+/// (the frame arrived in the tick before it, when its age restarted at 0) and the first BRAKE
+/// line after it. Returns (last valid frame's line tick, BRAKE line tick, BRAKE line's age).
+pub fn brake_after_last_frame(trace: &[Line]) -> Option<(u32, u32, u32)> {
+    let last_frame = trace
+        .windows(2)
+        .filter(|w| w[1].valid > w[0].valid)
+        .map(|w| &w[1])
+        .next_back()?;
+    let brake = trace.iter().find(|l| l.tick > last_frame.tick && l.brake)?;
+    Some((last_frame.tick, brake.tick, brake.age))
+}
+
+/// The emulator with the image booted.
+struct Qemu {
+    child: Child,
+    lines: Arc<Mutex<Vec<String>>>,
+    pty: String,
+}
+
+impl Qemu {
+    fn start(elf: &Path) -> Result<Self, String> {
+        let mut child = Command::new("qemu-system-arm")
+            .args([
+                "-machine",
+                "netduinoplus2",
+                "-cpu",
+                "cortex-m4",
+                "-nographic",
+            ])
+            .args(["-monitor", "none", "-serial", "pty"])
+            .args(["-semihosting-config", "enable=on,target=native", "-kernel"])
+            .arg(elf)
+            .stdout(Stdio::piped())
+            .stderr(Stdio::inherit())
+            .spawn()
+            .map_err(|e| format!("cannot start qemu-system-arm: {e}"))?;
+        let stdout = child.stdout.take().ok_or("no QEMU stdout")?;
+        let lines = Arc::new(Mutex::new(Vec::new()));
+        let sink = Arc::clone(&lines);
+        std::thread::spawn(move || {
+            for l in BufReader::new(stdout).lines().map_while(Result::ok) {
+                if let Ok(mut v) = sink.lock() {
+                    v.push(l);
+                }
+            }
+        });
+        let t0 = Instant::now();
+        loop {
+            let pty = lines.lock().ok().and_then(|v| {
+                v.iter().find_map(|l| {
+                    l.split_once("redirected to ")
+                        .and_then(|(_, r)| r.split_whitespace().next())
+                        .map(str::to_string)
+                })
+            });
+            if let Some(pty) = pty {
+                return Ok(Self { child, lines, pty });
+            }
+            if t0.elapsed() > Duration::from_secs(20) {
+                let _ = child.kill();
+                return Err("QEMU did not report its pty within 20 s".into());
+            }
+            std::thread::sleep(Duration::from_millis(50));
+        }
+    }
+
+    fn trace(&self) -> Vec<Line> {
+        self.lines
+            .lock()
+            .map(|v| v.iter().filter_map(|l| parse(l)).collect())
+            .unwrap_or_default()
+    }
+
+    /// Waits until `pred` holds for the trace, or fails after `secs`.
+    fn wait_for(
+        &self,
+        what: &str,
+        secs: u64,
+        pred: impl Fn(&[Line]) -> bool,
+    ) -> Result<(), String> {
+        let t0 = Instant::now();
+        while t0.elapsed() < Duration::from_secs(secs) {
+            if pred(&self.trace()) {
+                return Ok(());
+            }
+            std::thread::sleep(Duration::from_millis(50));
+        }
+        Err(format!(
+            "{what}: not seen in the firmware's trace within {secs} s"
+        ))
+    }
+}
+
+impl Drop for Qemu {
+    fn drop(&mut self) {
+        let _ = self.child.kill();
+        let _ = self.child.wait();
+    }
+}
+
+/// One `motorlink` run: its exit status and standard output.
+struct Run {
+    ok: bool,
+    stdout: String,
+}
+
+fn motorlink(bin: &Path, args: &[&str]) -> Result<Run, String> {
+    println!("$ motorlink {}", args.join(" "));
+    let o = Command::new(bin)
+        .args(args)
+        .stderr(Stdio::inherit())
+        .output()
+        .map_err(|e| format!("cannot run {}: {e}", bin.display()))?;
+    let stdout = String::from_utf8_lossy(&o.stdout).into_owned();
+    for l in stdout.lines().take(12) {
+        println!("  {l}");
+    }
+    Ok(Run {
+        ok: o.status.success(),
+        stdout,
+    })
+}
+
+fn expect(cond: bool, what: &str) -> Result<(), String> {
+    if cond {
+        println!("ok: {what}");
+        Ok(())
+    } else {
+        Err(what.to_string())
+    }
+}
+
+fn build(root: &Path, profile: &str) -> Result<(PathBuf, PathBuf), String> {
+    let cargo = std::env::var("CARGO").unwrap_or_else(|_| "cargo".into());
+    let status = |args: &[&str]| -> Result<(), String> {
+        let s = Command::new(&cargo)
+            .args(args)
+            .current_dir(root)
+            .status()
+            .map_err(|e| e.to_string())?;
+        s.success()
+            .then_some(())
+            .ok_or_else(|| format!("cargo {} failed", args.join(" ")))
+    };
+    status(&[
+        "build",
+        "-p",
+        "firmware",
+        "--release",
+        "--target",
+        "thumbv7em-none-eabihf",
+        "--features",
+        "qemu",
+        "--target-dir",
+        "target/qemu",
+        "--bin",
+        profile,
+    ])?;
+    status(&["build", "--release", "-p", "motorlink"])?;
+    Ok((
+        root.join("target/qemu/thumbv7em-none-eabihf/release")
+            .join(profile),
+        root.join("target/release/motorlink"),
+    ))
+}
+
+/// Runs the end-to-end session of `profile` and returns a summary.
+pub fn run(root: &Path, profile: &str) -> Result<String, String> {
+    let (elf, ml) = build(root, profile)?;
+    let q = Qemu::start(&elf)?;
+    println!("{profile} image booted, USART1 on {}", q.pty);
+    let summary = match profile {
+        "cdc" => cdc(&q, &ml),
+        "teensy" => teensy(&q, &ml),
+        other => Err(format!(
+            "no end-to-end session for profile '{other}' (cdc, teensy)"
+        )),
+    };
+    let trace = q.trace();
+    let path = root
+        .join("target/qemu")
+        .join(format!("e2e-{profile}-trace.txt"));
+    let text: Vec<String> = q.lines.lock().map(|v| v.clone()).unwrap_or_default();
+    let _ = std::fs::write(&path, text.join("\n"));
+    println!(
+        "firmware trace: {} lines in {}",
+        trace.len(),
+        path.display()
+    );
+    summary
+}
+
+/// The last line of the trace.
+fn last(q: &Qemu) -> Option<Line> {
+    q.trace().last().cloned()
+}
+
+fn cdc(q: &Qemu, ml: &Path) -> Result<String, String> {
+    let pty = q.pty.as_str();
+    let s = |v: &[&str]| -> Vec<String> { v.iter().map(|x| x.to_string()).collect() };
+    let _ = s;
+    // 1. Ping: PING → STATUS round trip.
+    let r = motorlink(ml, &["ping", "--kind", "serial", pty, "--count", "3"])?;
+    expect(r.ok, "PING answered (STATUS round trip)")?;
+    // Power-on: BRAKE latched, nothing moves.
+    let l = last(q).ok_or("no trace line")?;
+    expect(
+        l.brake && l.out.iter().all(|t| t == "S"),
+        "power-on: BRAKE, every motor shorted",
+    )?;
+    // 2. Enable, then drive: the commanded duties reach the traced outputs. PWM full scale under
+    // the emulator is 800 counts (16 MHz / 20 kHz): 300 → 240, -300 → -240, 0 → coast, 500 → 400.
+    let r = motorlink(ml, &["enable", "on", "--kind", "serial", pty])?;
+    expect(r.ok, "MOTOR_ENABLE 1 acknowledged")?;
+    let want = ["+240", "-240", "C", "+400"];
+    let mut drive = Command::new(ml)
+        .args(["drive", "--kind", "serial", pty, "--pwm", "300,-300,0,500"])
+        .args(["--timeout-ms", "200", "--seconds", "3"])
+        .stdout(Stdio::null())
+        .spawn()
+        .map_err(|e| e.to_string())?;
+    q.wait_for("the commanded duties on the outputs", 10, |t| {
+        t.iter().any(|l| !l.brake && l.out == want)
+    })?;
+    println!("ok: SET_MOTOR_PWM 300,-300,0,500 reached the outputs as {want:?}");
+    // 3. A corrupted frame (a SET_MOTOR_PWM of -900 on every motor with one payload bit flipped)
+    // changes nothing but the refusal count.
+    let before = last(q).ok_or("no trace line")?;
+    let bad = corrupted_pwm_frame();
+    let r = motorlink(
+        ml,
+        &[
+            "send-hex",
+            "--kind",
+            "serial",
+            pty,
+            &bad,
+            "--listen-ms",
+            "100",
+        ],
+    )?;
+    expect(r.ok, "corrupted frame sent")?;
+    q.wait_for("the corrupted frame refused", 5, |t| {
+        t.last().is_some_and(|l| l.rejected == before.rejected + 1)
+    })?;
+    let _ = drive.wait();
+    let after: Vec<Line> = q
+        .trace()
+        .into_iter()
+        .filter(|l| l.tick >= before.tick && !l.brake)
+        .collect();
+    expect(
+        after.iter().all(|l| l.out == want),
+        "while running, the outputs never left the last valid command",
+    )?;
+    // The host stopped: BRAKE strictly within timeout_ms = 200 of the last valid frame.
+    q.wait_for("BRAKE after the host stopped", 10, |t| {
+        t.last().is_some_and(|l| l.brake)
+    })?;
+    let (frame, brake, age) = brake_after_last_frame(&q.trace()).ok_or("no BRAKE after a frame")?;
+    // The frame came within the tick before `frame`; BRAKE at age = 199 = timeout − 1.
+    let worst_ms = brake - frame + 1;
+    expect(
+        age == 199 && worst_ms < 200,
+        &format!("comm loss: BRAKE {worst_ms} ms at most after the last valid frame (bound 200 ms), age {age}"),
+    )?;
+    // 4. ESTOP: latched at once, enable refused while engaged, released by its owner, re-armed by
+    // an explicit enable.
+    motorlink(ml, &["enable", "on", "--kind", "serial", pty])?;
+    let mut drive = Command::new(ml)
+        .args(["drive", "--kind", "serial", pty, "--pwm", "300,-300,0,500"])
+        .args(["--timeout-ms", "200", "--seconds", "2"])
+        .stdout(Stdio::null())
+        .spawn()
+        .map_err(|e| e.to_string())?;
+    q.wait_for("running again after the enable", 10, |t| {
+        t.last().is_some_and(|l| !l.brake)
+    })?;
+    let r = motorlink(ml, &["estop", "engage", "--kind", "serial", pty])?;
+    expect(r.ok, "ESTOP 1 acknowledged")?;
+    q.wait_for("ESTOP latched by the link", 5, |t| {
+        t.last()
+            .is_some_and(|l| l.brake && l.owners == 2 && l.out.iter().all(|o| o == "S"))
+    })?;
+    let _ = drive.wait();
+    let r = motorlink(ml, &["enable", "on", "--kind", "serial", pty])?;
+    expect(!r.ok, "MOTOR_ENABLE 1 refused while the ESTOP is engaged")?;
+    let r = motorlink(ml, &["estop", "release", "--kind", "serial", pty])?;
+    expect(r.ok, "ESTOP 0 from its owner acknowledged")?;
+    q.wait_for("ESTOP released, still braked", 5, |t| {
+        t.last().is_some_and(|l| l.brake && l.owners == 0)
+    })?;
+    let r = motorlink(ml, &["enable", "on", "--kind", "serial", pty])?;
+    expect(r.ok, "MOTOR_ENABLE 1 after the release acknowledged")?;
+    let r = motorlink(
+        ml,
+        &[
+            "drive",
+            "--kind",
+            "serial",
+            pty,
+            "--pwm",
+            "300,-300,0,500",
+            "--timeout-ms",
+            "100",
+            "--seconds",
+            "1",
+        ],
+    )?;
+    expect(r.ok, "driving after the re-arm")?;
+    q.wait_for("BRAKE after the last session", 10, |t| {
+        t.last().is_some_and(|l| l.brake)
+    })?;
+    let t = q.trace();
+    expect(
+        t.iter().rev().take(40).any(|l| !l.brake && l.out == want),
+        "the re-armed drive reached the outputs",
+    )?;
+    let (frame, brake, age) = brake_after_last_frame(&t).ok_or("no BRAKE after a frame")?;
+    let worst_ms2 = brake - frame + 1;
+    expect(
+        age == 99 && worst_ms2 < 100,
+        &format!("comm loss: BRAKE {worst_ms2} ms at most after the last valid frame (bound 100 ms), age {age}"),
+    )?;
+    Ok(format!(
+        "cdc end to end: PASS (comm-loss BRAKE at most {worst_ms} ms after the last frame with timeout_ms 200, {worst_ms2} ms with 100)"
+    ))
+}
+
+/// A SET_MOTOR_PWM frame of -900 on every motor, timeout 200, with one payload bit flipped after
+/// the CRC was computed (CRC-16/CCITT-FALSE written out here, independently of the protocol crate).
+fn corrupted_pwm_frame() -> String {
+    let mut body = vec![0x01u8, 10];
+    for _ in 0..4 {
+        body.extend_from_slice(&(-900i16).to_le_bytes());
+    }
+    body.extend_from_slice(&200u16.to_le_bytes());
+    let mut crc: u16 = 0xFFFF;
+    for b in &body {
+        crc ^= u16::from(*b) << 8;
+        for _ in 0..8 {
+            crc = if crc & 0x8000 != 0 {
+                (crc << 1) ^ 0x1021
+            } else {
+                crc << 1
+            };
+        }
+    }
+    let mut frame = vec![0xAA, 0x55];
+    frame.extend_from_slice(&body);
+    frame.extend_from_slice(&crc.to_le_bytes());
+    if let Some(b) = frame.get_mut(5) {
+        *b ^= 0x10;
+    }
+    frame.iter().map(|b| format!("{b:02x}")).collect()
+}
+
+fn teensy(q: &Qemu, ml: &Path) -> Result<String, String> {
+    let pty = q.pty.as_str();
+    let r = motorlink(ml, &["ping", "--kind", "teensy", pty, "--count", "3"])?;
+    expect(r.ok, "probe (ENDEFF_OFF echo) answered")?;
+    // 30°, -45°, 90°, 0° at 1600 steps per revolution: 133.3 → 133, -200, 400, 0 steps.
+    let want = ["+133", "-200", "+400", "+0"];
+    let r = motorlink(
+        ml,
+        &[
+            "move",
+            "--kind",
+            "teensy",
+            pty,
+            "--cal",
+            "--angles",
+            "30,-45,90,0",
+            "--speed",
+            "90",
+            "--seconds",
+            "3",
+        ],
+    )?;
+    expect(
+        r.ok && !r.stdout.contains("\"cmd_success\":0"),
+        "CAL and MTRS echoed with cmd_success 1",
+    )?;
+    q.wait_for("the joints' step targets at the angles", 5, |t| {
+        t.iter().any(|l| !l.brake && l.out == want)
+    })?;
+    println!("ok: MTRS 30,-45,90,0 reached the step targets as {want:?}");
+    q.wait_for("BRAKE after the host stopped", 10, |t| {
+        t.last().is_some_and(|l| l.brake)
+    })?;
+    let (frame, brake, age) = brake_after_last_frame(&q.trace()).ok_or("no BRAKE after a frame")?;
+    let worst_ms = brake - frame + 1;
+    expect(
+        age == 249 && worst_ms < 250,
+        &format!("comm loss: BRAKE {worst_ms} ms at most after the last valid frame (bound 250 ms), age {age}"),
+    )?;
+    let braked = last(q).ok_or("no trace line")?;
+    expect(
+        braked.out == want,
+        "BRAKE stopped the joints where they stood",
+    )?;
+    Ok(format!(
+        "teensy end to end: PASS (comm-loss BRAKE at most {worst_ms} ms after the last frame, bound 250 ms)"
+    ))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    const LINES: &str = "char device redirected to /dev/pts/3 (label serial0)
+tick=1 mode=Brake age=1 drive=BRAKE valid=0 rejected=0 refusals=0 owners=0 out=S S S S
+tick=40 mode=Brake age=0 drive=BRAKE valid=1 rejected=0 refusals=0 owners=0 out=S S S S
+tick=41 mode=Reduced age=0 drive=RUN valid=2 rejected=0 refusals=0 owners=0 out=+4 -4 C +4
+tick=60 mode=Reduced age=1 drive=RUN valid=3 rejected=1 refusals=0 owners=0 out=+240 -240 C +400
+tick=259 mode=Brake age=199 drive=BRAKE valid=3 rejected=1 refusals=0 owners=0 out=S S S S";
+
+    #[test]
+    fn reads_the_firmware_trace() {
+        let t: Vec<Line> = LINES.lines().filter_map(parse).collect();
+        assert_eq!(t.len(), 5, "the QEMU banner is not a trace line");
+        assert_eq!(t[3].out, ["+240", "-240", "C", "+400"]);
+        assert_eq!(
+            (t[3].tick, t[3].rejected, t[3].mode.as_str()),
+            (60, 1, "Reduced")
+        );
+        assert!(t[4].brake && !t[3].brake);
+        // The last frame was counted at tick 60; BRAKE at 259, age 199.
+        assert_eq!(brake_after_last_frame(&t), Some((60, 259, 199)));
+    }
+
+    #[test]
+    fn the_corrupted_frame_fails_its_crc() {
+        // The uncorrupted frame's CRC from the seed's algorithm, checked against the protocol
+        // crate's encoder would tie the two together; instead the corruption must leave the
+        // length and SOF intact and change one payload bit.
+        let hex = corrupted_pwm_frame();
+        assert_eq!(hex.len(), 32, "16 bytes");
+        assert!(hex.starts_with("aa55010a"));
+        // -900 = 0xFC7C little endian: 7c fc; byte 5 (0xfc) had bit 4 flipped to 0xec.
+        assert_eq!(&hex[8..12], "7cec");
+    }
+}
