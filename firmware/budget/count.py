@@ -33,7 +33,14 @@ import gdb  # noqa: F401  (provided by gdb)
 import json
 import os
 import re
+import socket
 import subprocess
+import sys
+import time
+
+# Run by gdb from the repository root (run.sh); serial_frames.py sits beside this script.
+sys.path.insert(0, os.path.join("firmware", "budget"))
+import serial_frames  # noqa: E402
 
 OUT = os.environ["BUDGET_JSON"]
 SAMPLES = int(os.environ.get("BUDGET_SAMPLES", "5"))
@@ -44,13 +51,18 @@ ESTOP_BIT = 1 << 4
 # NVIC interrupt set-pending registers; interrupt numbers of the handlers QEMU never triggers.
 NVIC_ISPR = 0xE000_E200
 IRQ_EXTI4 = 10
+IRQ_USART1 = 37
+# ADC1 status register and its end-of-conversion bit: QEMU's ADC never sets it (the `cdc` image's
+# battery reading would poll until its timeout); it reads set at the first poll.
+ADC1_SR = 0x4001_2000
+ADC_EOC = 1 << 1
 # Scratch word for `pend`: the far end of the stack (flip-link puts the stack below the statics,
 # growing down towards the start of RAM; no run comes near it).
 STUB = 0x2000_0000
 
 # name, symbol, kind ("fn" returns to its caller; "isr" returns from the exception), options.
 # The ESTOP press comes last: it latches ESTOP, so every later tick would run braked.
-UNITS = [
+AMR_SPI = [
     ("frame: receive (CRC + decode + validate + ladder step)", "mcu::link::LinkTask::receive", "fn", {}),
     ("frame: feedback (encode feedback frame)", "mcu::link::LinkTask::feedback", "fn", {}),
     ("tick: run (conditions + ladder step)", "mcu::tick::TickTask::run", "fn", {}),
@@ -68,6 +80,63 @@ UNITS = [
     ("estop_input handler (EXTI4), press edge", "EXTI4", "isr",
      {"pend": IRQ_EXTI4, "force_load": {GPIOD_IDR: ESTOP_BIT}, "samples": 1}),
 ]
+# The serial images (seed 001 `cdc`, seed 003 `teensy`): USART1 bytes fed by this script through
+# QEMU's `-serial` (option "feed": one byte per sample from serial_frames.FEEDS, the link task's body
+# or handler counted for each); ticks sampled with the link alive (option "keepalive": a whole frame
+# sent every 20 ticks, as the host's 50 Hz). The ESTOP frames and the press come last (latches).
+LINK_BYTE = "link: one received byte"
+# The link tasks' bodies: one call per received byte.
+CDC_BYTE = "mcu::cdc::CdcLinkTask::on_byte"
+TEENSY_BYTE = "mcu::teensy::TeensyLinkTask::on_byte"
+USART1 = "link_usart handler (USART1), one received byte"
+SERIAL_TICK = ("tick: run (ESTOP input, supply, ladder tick)", "mcu::serial::tick", "fn",
+               {"keepalive": True})
+# What one transmit interrupt costs on the board (QEMU's USART takes every byte at once, so the
+# emulator never raises one): the interrupt pended with nothing received and nothing queued.
+USART1_IDLE = ("link_usart handler (USART1), nothing received or queued", "USART1", "isr",
+               {"pend": IRQ_USART1, "samples": 1})
+# The ladder enters REDUCED when it leaves the power-on BRAKE (a recent HOLD episode) and returns
+# to NORMAL after a clean window of 1000 ticks: frames are counted in NORMAL after this many ticks.
+SETTLE = 1000
+# Once the units above are counted the link stops: HOLD, STOP and BRAKE each record a trace entry.
+# The commands then start from BRAKE.
+TRACE_UNIT = ("trace: one record (ring entry + defmt log line)", "mcu::trace::Trace::push", "fn",
+              {"samples": min(SAMPLES, 3)})
+ESTOP_PRESS = ("estop_input handler (EXTI4), press edge", "EXTI4", "isr",
+               {"pend": IRQ_EXTI4, "force_load": {GPIOD_IDR: ESTOP_BIT}, "samples": 1})
+CDC = [
+    (LINK_BYTE + ", enable", CDC_BYTE, "fn", {"feed": "cdc-enable"}),
+    (LINK_BYTE + ", drive", CDC_BYTE, "fn", {"settle": SETTLE, "feed": "cdc-drive"}),
+    (USART1, "USART1", "isr", {"feed": "cdc-usart"}),
+    USART1_IDLE,
+    SERIAL_TICK,
+    ("watchdog_tick handler (TIM2)", "TIM2", "isr", {"keepalive": True}),
+    # STATUS goes out every 100 ticks: the tick after the one that sent a STATUS, plus 99.
+    ("watchdog_tick handler (TIM2), periodic STATUS", "TIM2", "isr",
+     {"keepalive": True, "after_reply": (serial_frames.STATUS_PREFIX, 100), "samples": 1}),
+    ("imu_read handler (TIM3)", "TIM3", "isr", {"keepalive": True, "force_load": {ADC1_SR: ADC_EOC}}),
+    TRACE_UNIT,
+    (LINK_BYTE + ", commands", CDC_BYTE, "fn", {"feed": "cdc-commands"}),
+    ESTOP_PRESS,
+]
+TEENSY = [
+    (LINK_BYTE + ", enable", TEENSY_BYTE, "fn", {"feed": "teensy-enable"}),
+    (LINK_BYTE + ", drive", TEENSY_BYTE, "fn",
+     {"settle": SETTLE, "feed": "teensy-drive"}),
+    (USART1, "USART1", "isr", {"feed": "teensy-usart"}),
+    USART1_IDLE,
+    SERIAL_TICK,
+    ("watchdog_tick handler (TIM2)", "TIM2", "isr", {"keepalive": True}),
+    # The joints move (the frames above changed the pose): every joint steps.
+    ("step generator: run", "mcu::teensy::StepGen::run", "fn", {}),
+    ("step_gen handler (TIM5)", "TIM5", "isr", {}),
+    TRACE_UNIT,
+    ESTOP_PRESS,
+]
+PROFILE = os.environ.get("BUDGET_PROFILE", "amr-spi")
+UNITS = {"amr-spi": AMR_SPI, "cdc": CDC, "teensy": TEENSY}[PROFILE]
+KEEPALIVE = serial_frames.KEEPALIVE.get(PROFILE)
+LINK_BODY = {"cdc": CDC_BYTE, "teensy": TEENSY_BYTE}.get(PROFILE)
 # Calls run through uncounted: the emulator's trace printing (the board prints nothing per tick).
 SKIP = re.compile(r"core::fmt::|cortex_m_semihosting::|fixed::display::|as core::fmt::")
 # Code the board does not run: the emulator's link and hooks, semihosting.
@@ -209,12 +278,100 @@ def count_call(kind, unit_range, skip_entries, force_load, stats):
         stats["pcs"], stats["inclusive"] = pcs, inclusive
 
 
+class Link:
+    """The guest's USART1 as QEMU serves it on a TCP socket (`-serial` on a server chardev).
+
+    QEMU's USART holds one received byte until the firmware reads it, and QEMU's I/O thread moves
+    the next one in at whatever pace the (loaded) host gives it: sent while the firmware ran, a
+    byte took several emulated milliseconds to arrive, long enough for a frame to age the ladder
+    into HOLD. So each byte is handed over while the core is halted (`put`): sent, then the core
+    resumes once the USART's RXNE flag (read by gdb, which QEMU answers without side effects)
+    shows QEMU has taken it."""
+
+    # USART1 status register and its receive-not-empty flag.
+    SR = 0x4001_1000
+    RXNE = 1 << 5
+
+    def __init__(self, port):
+        self.sock = socket.create_connection(("127.0.0.1", port), timeout=30)
+
+    def put(self, byte):
+        self.sock.sendall(bytes([byte]))
+        inf = gdb.selected_inferior()
+        for _ in range(2000):
+            if int.from_bytes(bytes(inf.read_memory(self.SR, 4)), "little") & self.RXNE:
+                return
+            time.sleep(0.001)
+        raise gdb.error("QEMU did not take a byte within 2 s")
+
+    def drain(self):
+        """What the guest sent so far (its replies)."""
+        got = b""
+        self.sock.setblocking(False)
+        try:
+            while True:
+                chunk = self.sock.recv(4096)
+                if not chunk:
+                    break
+                got += chunk
+        except BlockingIOError:
+            pass
+        self.sock.setblocking(True)
+        return got
+
+
+def deliver(syms, link, frame):
+    """Hands `frame` to the firmware byte by byte, each taken by its link task (uncounted)."""
+    body = gdb.Breakpoint("*" + hex(syms[LINK_BODY][0]), internal=True)
+    for b in frame:
+        link.put(b)
+        gdb.execute("continue", to_string=True)
+    body.delete()
+
+
+def run_ticks(syms, n, link=None):
+    """Lets the firmware run uncounted until `n` more ticks (TIM2 handler entries) have begun; with
+    `link`, the keepalive frame goes out every 20 ticks, as the host would send it."""
+    tim2 = gdb.Breakpoint("*" + hex(syms["TIM2"][0]), internal=True)
+    tim2.enabled = False
+    while n > 0:
+        chunk = min(n, KEEPALIVE[1]) if link else n
+        if link:
+            deliver(syms, link, KEEPALIVE[0])
+        tim2.enabled = True
+        tim2.ignore_count = chunk - 1
+        gdb.execute("continue", to_string=True)
+        tim2.enabled = False
+        n -= chunk
+    tim2.delete()
+
+
+def find_phase(syms, link, prefix, period):
+    """Runs tick by tick (the link alive) until a reply starting with `prefix` arrives, then on to
+    the tick before the next one (`period` ticks later); returns the replies seen."""
+    seen = b""
+    for k in range(period + 1):
+        if k % KEEPALIVE[1] == 0:
+            deliver(syms, link, KEEPALIVE[0])
+        run_ticks(syms, 1)
+        seen += link.drain()
+        if prefix in seen:
+            run_ticks(syms, period - 2, link)
+            return seen
+    raise gdb.error(f"no reply {prefix.hex()} within {period} ticks")
+
+
 def main():
     gdb.execute("set pagination off")
     gdb.execute("set confirm off")
     syms = elf_symbols(gdb.current_progspace().filename)
     skip_entries = {a for name, (a, _) in syms.items() if SKIP.search(name)}
     gdb.execute("target remote :" + os.environ.get("GDB_PORT", "3333"))
+    serial_port = os.environ.get("BUDGET_SERIAL_PORT")
+    link = Link(int(serial_port)) if serial_port else None
+    if link:
+        # QEMU drops what arrives before the firmware has enabled USART1: feed only once it ticks.
+        run_ticks(syms, 1)
     results = {}
     # BUDGET_ONLY=receive counts only the units whose symbol contains that text (for quick looks).
     only = os.environ.get("BUDGET_ONLY", "")
@@ -225,18 +382,38 @@ def main():
         # breakpoint on a name: the prologue may already use `lr` as a scratch register, and the
         # return address is read from `lr` at the stop.
         address, size = syms[sym]
+        started = time.time()
+        if "settle" in opts:
+            run_ticks(syms, opts["settle"], link)
         bp = gdb.Breakpoint("*" + hex(address), internal=True)
         stats = {"instructions": [], "stack_bytes": [], "own": [], "emulator": [],
                  "emulator_own": [], "skipped": [], "traced": [], "pcs": {}, "inclusive": {}}
-        samples = opts.get("samples", SAMPLES)
+        feed = serial_frames.schedule(opts["feed"]) if "feed" in opts else None
+        samples = len(feed) if feed else opts.get("samples", SAMPLES)
         try:
-            for _ in range(samples):
+            for i in range(samples):
                 if "pend" in opts:
                     pend(opts["pend"])
+                if "after_reply" in opts:
+                    bp.enabled = False
+                    find_phase(syms, link, *opts["after_reply"])
+                    bp.enabled = True
+                if feed:
+                    link.put(feed[i][3])
+                elif opts.get("keepalive") and i % KEEPALIVE[1] == 0:
+                    bp.enabled = False
+                    deliver(syms, link, KEEPALIVE[0])
+                    bp.enabled = True
                 gdb.execute("continue", to_string=True)
                 bp.enabled = False
                 count_call(kind, (address, address + size), skip_entries, opts.get("force_load"), stats)
+                if feed:
+                    stats.setdefault("fed", []).append(list(feed[i][:4]))
+                    if feed[i][4]:
+                        run_ticks(syms, feed[i][4])
                 bp.enabled = True
+                if link:
+                    stats["replies"] = stats.get("replies", "") + link.drain().hex()
         except gdb.error as e:
             # Typically the firmware ended (frames.bin exhausted) before the unit ran often enough:
             # the units counted so far are kept, report.py lists this one as not measured.
@@ -255,6 +432,7 @@ def main():
         stats["inclusive"] = dict(sorted(stats["inclusive"].items(), key=lambda x: -x[1]))
         stats["symbol"] = sym
         results[title] = stats
+        print(f"counted {title}: {len(stats['instructions'])} calls, {time.time() - started:.0f} s")
     with open(OUT, "w") as f:
         json.dump(results, f, indent=1)
     if "_failed" not in results:

@@ -2,11 +2,18 @@
 """Turns the size listing, the instruction counts, the stack analysis and the handler facts into
 firmware/BUDGET.md.
 
-Usage: report.py SIZE_TXT COUNTS_JSON STACK_MD HANDLERS_JSON > BUDGET.md
-(arm-none-eabi-size -A output, count.py's JSON, stack.py's Markdown, handlers.py's JSON).
+Usage: report.py DIR PROFILE... > BUDGET.md
+DIR/<profile>/ holds what run.sh gathered for that image: size.txt (arm-none-eabi-size -A),
+counts.json (count.py), stack.md (stack.py), handlers.json (handlers.py) and qemu.log (QEMU's output,
+the serial images' trace). `amr-spi` gets the sections it always had; `cdc` and `teensy` a section
+each (report.py's SERIAL says what each runs and sends).
 """
 import json
+import os
 import sys
+
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+import serial_frames  # noqa: E402
 
 F_CPU = 168e6
 # Cycles per instruction assumed for the load estimate: Cortex-M4 executes most instructions in
@@ -152,20 +159,25 @@ def profile_table(out, prof, limit=14):
     out.append("")
 
 
-def main(size_path, counts_path, stack_path, handlers_path):
-    sec, flash, ram = sizes(size_path)
-    counts = json.load(open(counts_path))
-    failed = counts.pop("_failed", None)
-    facts = json.load(open(handlers_path))
-    board, qemu = facts["board"], facts["qemu"]
-    by_sym = {r["symbol"]: (name, r) for name, r in counts.items()}
-    mx = {name: max(r["instructions"]) for name, r in counts.items()}
-    out = []
-    out.append("# Firmware budgets\n")
-    out.append("Regenerate with `bash firmware/budget/run.sh` (board build sizes; instruction counts of the")
-    out.append("`qemu` build's Cortex-M4 code under QEMU netduinoplus2, single-stepped by gdb; the board")
-    out.append("build's handlers from its disassembly).\n")
-    out.append("## Memory (board build, `cargo fw`)\n")
+class Image:
+    """What run.sh gathered for one image in DIR/<profile>/: sizes, counts, handler facts, the
+    stack section and QEMU's output."""
+
+    def __init__(self, d):
+        self.sec, self.flash, self.ram = sizes(os.path.join(d, "size.txt"))
+        self.counts = json.load(open(os.path.join(d, "counts.json")))
+        self.failed = self.counts.pop("_failed", None)
+        facts = json.load(open(os.path.join(d, "handlers.json")))
+        self.board, self.qemu = facts["board"], facts["qemu"]
+        self.stack = open(os.path.join(d, "stack.md")).read().rstrip()
+        log = os.path.join(d, "qemu.log")
+        self.log = open(log, errors="replace").read() if os.path.exists(log) else ""
+
+
+def memory(out, img, level="##"):
+    """The board build's sections, flash and static RAM."""
+    sec, flash, ram = img.sec, img.flash, img.ram
+    out.append(f"{level} Memory (board build, `cargo fw`)\n")
     out.append("| section | bytes |\n|---|---|")
     for s in (".vector_table", ".text", ".rodata", ".data", ".bss", ".uninit"):
         if s in sec:
@@ -174,14 +186,82 @@ def main(size_path, counts_path, stack_path, handlers_path):
     out.append(f"| **static RAM** (data + bss + uninit: the defmt RTT buffer, the reset record) | **{ram}** of 131 072 ({100*ram/131072:.1f} %) |")
     out.append("\nThe stack is the rest of RAM below the statics (flip-link), far above the bounds below.\n")
 
-    out.append("## Executed instructions (min / max over the sampled calls)\n")
+
+def units(out, img, level="##"):
+    """Every counted unit: min / max instructions and the deepest stack seen."""
+    out.append(f"{level} Executed instructions (min / max over the sampled calls)\n")
     out.append("| unit | symbol | instructions | own stack, bytes |\n|---|---|---|---|")
-    for name, r in counts.items():
+    for name, r in img.counts.items():
         ins = r["instructions"]
         out.append(f"| {name} | `{r['symbol']}` | {min(ins)} / {max(ins)} | {max(r['stack_bytes'])} |")
-    if failed:
-        out.append(f"\n**Counting stopped early** ({failed}); the units after it are not measured.")
+    if img.failed:
+        out.append(f"\n**Counting stopped early** ({img.failed}); the units after it are not measured.")
     out.append("")
+
+
+def bodies(out, counts, names, level="###"):
+    """The board-application bodies `names` inside the handlers, and the heading of the profiles."""
+    out.append(f"{level} Board-application bodies inside their handlers\n")
+    out.append("Everything executed while the body was active (its code, code inlined into it, the")
+    out.append("functions it called), in the handler's worst sampled call:\n")
+    out.append("| body | handler | instructions |\n|---|---|---|")
+    for name, r in counts.items():
+        if r["symbol"].startswith("mcu::"):
+            continue
+        for fn, k in r.get("inclusive", {}).items():
+            if short(fn) in names:
+                out.append(f"| `{short(fn)}` | `{r['symbol']}` | {k} |")
+    out.append("")
+
+    out.append(f"{level} Where the instructions go\n")
+    out.append("Instructions per function in the worst sampled call (code inlined into a caller is counted")
+    out.append("in the inlined function, by the debug info; `?` has no debug info).\n")
+
+
+class Load:
+    """The CPU load table: a row per task (or per part of one), the total of the periodic rows."""
+
+    def __init__(self, out, level="##"):
+        self.out, self.total, self.sporadic = out, 0.0, []
+        out.append(f"{level} CPU load at 168 MHz\n")
+        out.append(f"Board build, assuming {CPI} cycles per instruction on average (pessimistic for this code):\n")
+        out.append("| task (interrupt) | priority | trigger | rate, Hz | instructions per run | µs per run | "
+                   "cycles/s | share | estimated as |")
+        out.append("|---|---|---|---|---|---|---|---|---|")
+
+    def row(self, task, prio, trigger, rate, n, how, cycles=0):
+        """`n` instructions per run (None: not measured, or only `cycles`), plus `cycles` spent waiting;
+        `rate` None for a task run per event."""
+        if n is None and not cycles:
+            self.out.append(f"| {task} | {prio} | {trigger} | {rate or 'event'} | ? | | | | not measured |")
+            return
+        per_run = (n or 0) * CPI + cycles
+        shown = "–" if n is None else n
+        us = per_run / F_CPU * 1e6
+        if rate:
+            c = rate * per_run
+            self.total += c
+            self.out.append(f"| {task} | {prio} | {trigger} | {rate} | {shown} | {us:.1f} | {c:,.0f} | "
+                            f"{100*c/F_CPU:.1f} % | {how} |")
+        else:
+            self.sporadic.append(task.split(" ")[0])
+            self.out.append(f"| {task} | {prio} | {trigger} | per event | {shown} | {us:.1f} | – | – | {how} |")
+
+    def end(self):
+        """The total row; returns the periodic cycles per second and the tasks run per event."""
+        self.out.append(f"| **total (periodic tasks)** | | | | | | {self.total:,.0f} | "
+                        f"**{100*self.total/F_CPU:.1f} %** | |")
+        self.out.append("")
+        return self.total, self.sporadic
+
+
+def amr_spi(out, img):
+    """The `amr-spi` image's sections; returns its figures for the overview."""
+    counts, board, qemu = img.counts, img.board, img.qemu
+    by_sym = {r["symbol"]: (name, r) for name, r in counts.items()}
+    mx = {name: max(r["instructions"]) for name, r in counts.items()}
+    memory(out, img)
+    units(out, img)
     out.append("Units named by an interrupt symbol are whole RTIC handlers of the `qemu` build (entry to")
     out.append("exception return, RTIC's lock code included); the others are board-application functions")
     out.append("kept out of line (`#[inline(never)]`) so they can be counted alone. In the handlers, the")
@@ -220,21 +300,7 @@ def main(size_path, counts_path, stack_path, handlers_path):
         out.append("under the CPU load).")
     out.append("")
 
-    out.append("### Board-application bodies inside their handlers\n")
-    out.append("Everything executed while the body was active (its code, code inlined into it, the")
-    out.append("functions it called), in the handler's worst sampled call:\n")
-    out.append("| body | handler | instructions |\n|---|---|---|")
-    for name, r in counts.items():
-        if r["symbol"].startswith("mcu::"):
-            continue
-        for fn, k in r.get("inclusive", {}).items():
-            if short(fn) in BODIES:
-                out.append(f"| `{short(fn)}` | `{r['symbol']}` | {k} |")
-    out.append("")
-
-    out.append("### Where the instructions go\n")
-    out.append("Instructions per function in the worst sampled call (code inlined into a caller is counted")
-    out.append("in the inlined function, by the debug info; `?` has no debug info).\n")
+    bodies(out, counts, BODIES)
     rec = counts.get(RECEIVE)
     if rec:
         incl = rec.get("inclusive", {})
@@ -256,13 +322,7 @@ def main(size_path, counts_path, stack_path, handlers_path):
         out.append(f"{dma[0]} (the `qemu` build; the board's handler code differs, see the load estimate):\n")
         profile_table(out, dma[1]["by_function"], limit=10)
 
-    out.append("## CPU load at 168 MHz\n")
-    out.append(f"Board build, assuming {CPI} cycles per instruction on average (pessimistic for this code):\n")
-    out.append("| task (interrupt) | priority | trigger | rate, Hz | instructions per run | µs per run | "
-               "cycles/s | share | estimated as |")
-    out.append("|---|---|---|---|---|---|---|---|---|")
-    total = 0.0
-    sporadic = []
+    load = Load(out)
     for task, sym, prio, rate, trigger in TASKS:
         b, q = board.get(sym), qemu.get(sym)
         if sym in by_sym and b and q:
@@ -274,19 +334,9 @@ def main(size_path, counts_path, stack_path, handlers_path):
                    f"instructions, loop-free: a bound for its own code" + (f", without its calls ({calls})"
                                                                           if calls else ""))
         else:
-            out.append(f"| {task} (`{sym}`) | {prio} | {trigger} | {rate or 'event'} | ? | | | | not measured |")
-            continue
-        us = n * CPI / F_CPU * 1e6
-        if rate:
-            c = rate * n * CPI
-            total += c
-            out.append(f"| {task} (`{sym}`) | {prio} | {trigger} | {rate} | {n} | {us:.1f} | {c:,.0f} | "
-                       f"{100*c/F_CPU:.1f} % | {how} |")
-        else:
-            sporadic.append(task)
-            out.append(f"| {task} (`{sym}`) | {prio} | {trigger} | per event | {n} | {us:.1f} | – | – | {how} |")
-    out.append(f"| **total (periodic tasks)** | | | | | | {total:,.0f} | **{100*total/F_CPU:.1f} %** | |")
-    out.append("")
+            n, how = None, None
+        load.row(f"{task} (`{sym}`)", prio, trigger, rate, n, how)
+    total, sporadic = load.end()
     notes = []
     if sporadic:
         notes.append(f"{', '.join(f'`{t}`' for t in sporadic)} runs once per input edge, not at a rate, "
@@ -325,9 +375,289 @@ def main(size_path, counts_path, stack_path, handlers_path):
     for note in notes:
         out.append(note)
         out.append("")
-    out.append(open(stack_path).read().rstrip())
-    print("\n".join(out))
+    out.append(img.stack)
+    return {"frame": frame, "frame_what": "SPI command frame (receive)", "tick": mx.get(TICK),
+            "load": 100 * total / F_CPU}
+
+
+# The serial images. `frame`: the frame the host sends at `rate` frames/s (its nominal rate);
+# `tasks`: the RTIC tasks besides the link (task, interrupt, priority, rate in Hz or None for an
+# event, trigger); `sent`: what the board sends (name, bytes, per second), one transmit interrupt
+# per byte on the board; `bodies`: board-application bodies to show inside their handlers.
+LINK_BAUD_BYTES = 115_200 // 10
+SERIAL = {
+    "cdc": {
+        "title": "Image `cdc` (seed 001: `AA 55` frames on USART1)",
+        "frame": "SET_MOTOR_PWM (NORMAL)",
+        "rate": 50,
+        "tasks": [
+            ("estop_input", "EXTI4", 5, None, "ESTOP input edge (PD4)"),
+            ("watchdog_tick", "TIM2", 2, 1_000, "TIM2 update"),
+            ("imu_read", "TIM3", 1, 100, "TIM3 update"),
+        ],
+        "sent": [("STATUS", serial_frames.cdc_len("status"), 10),
+                 ("IMU_MPU6050", serial_frames.cdc_len("imu"), 100)],
+        "bodies": ["mcu::serial::tick", "mcu::cdc::CdcLinkTask::on_byte", "mcu::cdc::CdcLinkTask::periodic",
+                   "mcu::cdc::CdcLinkTask::send_status", "mcu::cdc::motor_outputs",
+                   "mcu::estop::EstopInput::poll", "mcu::estop::EstopInput::edge_then"],
+    },
+    "teensy": {
+        "title": "Image `teensy` (seed 003: COBS + CRC frames on USART1)",
+        "frame": "MTRS (NORMAL)",
+        "rate": 50,
+        "tasks": [
+            ("estop_input", "EXTI4", 5, None, "ESTOP input edge (PD4)"),
+            ("step_gen", "TIM5", 3, 10_000, "TIM5 update"),
+            ("watchdog_tick", "TIM2", 2, 1_000, "TIM2 update"),
+        ],
+        "sent": [("MTRS echo", len(serial_frames.teensy(serial_frames.MTRS)), 50)],
+        "bodies": ["mcu::serial::tick", "mcu::teensy::TeensyLinkTask::on_byte", "mcu::teensy::Joints::tick",
+                   "mcu::teensy::StepGen::run", "mcu::estop::EstopInput::poll",
+                   "mcu::estop::EstopInput::edge_then"],
+    },
+}
+LINK_BODY = "link: one received byte"
+LINK_HANDLER = "link_usart handler (USART1), one received byte"
+LINK_IDLE = "link_usart handler (USART1), nothing received or queued"
+SERIAL_TICK = "tick: run (ESTOP input, supply, ladder tick)"
+STATUS_TICK = "watchdog_tick handler (TIM2), periodic STATUS"
+# The `cdc` battery reading: ADC1 clocked at PCLK2 / 2 = 42 MHz (`board::cdc::Vbat::new` leaves
+# ADCPRE at its reset value), 480 sampling + 12 conversion ADC cycles, polled.
+ADC_HZ = 42e6
+ADC_CYCLES = 480 + 12
+# The MPU6050 reading (`board::cdc::Imu::read`: mpu6050-dmp's `motion6`, 14 bytes, then
+# `temperature`, 2 bytes): two I2C write-reads at 400 kHz, each START, address + W, register,
+# repeated START, address + R, the data bytes and STOP (9 bit times per byte with its acknowledge).
+I2C_HZ = 400e3
+I2C_BITS = sum(1 + 9 + 9 + 1 + 9 + 9 * n + 1 for n in (14, 2))
+
+
+def fed_frames(r):
+    """The frames a fed unit received, in order: (label, per-byte instructions, per-byte trace
+    instructions, per-byte emulator instructions)."""
+    frames = {}
+    for (label, k, _pos, _byte), n, tr, emu in zip(r["fed"], r["instructions"], r["traced"], r["emulator"]):
+        f = frames.setdefault(k, (label, [], [], []))
+        f[1].append(n)
+        f[2].append(tr)
+        f[3].append(emu)
+    return list(frames.values())
+
+
+def span(values):
+    """`a` or `a–b`."""
+    lo, hi = min(values), max(values)
+    return f"{lo}" if lo == hi else f"{lo}–{hi}"
+
+
+def trace_modes(log):
+    """The firmware's trace (QEMU's output): the rung changes `Mode@tick`, and the last line."""
+    changes, last, mode = [], None, None
+    for line in log.splitlines():
+        if line.startswith("tick="):
+            f = dict(p.split("=", 1) for p in line.split(" out=")[0].split())
+            if f["mode"] != mode:
+                mode = f["mode"]
+                changes.append(f"{mode}@{f['tick']}")
+            last = f
+    return changes, last
+
+
+def serial(out, profile, img):
+    """A serial image's section; returns its figures for the overview."""
+    cfg = SERIAL[profile]
+    counts, board, qemu = img.counts, img.board, img.qemu
+    first = {}
+    for name, r in counts.items():
+        first.setdefault(r["symbol"], r)
+    out.append(f"## {cfg['title']}\n")
+    memory(out, img, "###")
+    units(out, img, "###")
+    out.append("Bytes go to the `qemu` build's USART1 through QEMU's `-serial` (a TCP chardev), one at a")
+    out.append("time: count.py hands each over while the core is halted and resumes it once the USART holds")
+    out.append("it, so each received byte is one interrupt, as at 115 200 baud on the board. Frames follow")
+    out.append("each other 20 ticks apart (the host's 50 Hz); the ticks are sampled with a frame every 20")
+    out.append("ticks. The frames are built by `protocol/golden/gen_structs.py` (Python `struct`,")
+    out.append("independently of the Rust encoders; `firmware/budget/serial_frames.py` lists them).")
+    out.append("")
+
+    # Per received frame: the link body's counts, and the handler's.
+    rows, per_label = [], {}
+    for name, r in counts.items():
+        if "fed" not in r:
+            continue
+        for label, ins, tr, emu in fed_frames(r):
+            key = (label, "handler" if r["symbol"] == "USART1" else "body")
+            per_label.setdefault(key, []).append((ins, tr, emu))
+            if key not in rows:
+                rows.append(key)
+    out.append("### Per received frame\n")
+    out.append("Each frame's bytes counted one by one, in one frame; the last byte completes the frame (CRC,")
+    out.append("decode, the ladder step, a reply queued). Min / max over the frames of a kind.\n")
+    out.append("| frame | counted | bytes | each byte before the last | the last byte | **per frame** |")
+    out.append("|---|---|---|---|---|---|")
+    notes = []
+    for label, what in rows:
+        got = per_label[(label, what)]
+        before = [n for ins, _, _ in got for n in ins[:-1]]
+        last = [ins[-1] for ins, _, _ in got]
+        sums = [sum(ins) for ins, _, _ in got]
+        unit = "`link_usart` handler" if what == "handler" else "link body (`on_byte`)"
+        out.append(f"| {label} | {unit} | {len(got[0][0])} | {span(before)} | {span(last)} | **{span(sums)}** |")
+        traced = max(tr[-1] for _, tr, _ in got)
+        if traced:
+            notes.append(f"{label}: its last byte records a trace entry ({traced} of its instructions: the "
+                         f"ring entry and the defmt log line).")
+    out.append("")
+    for n in notes:
+        out.append(n)
+    if notes:
+        out.append("")
+
+    frame = cfg["frame"]
+    body = per_label.get((frame, "body"))
+    handler = per_label.get((frame, "handler"))
+    summary = {"frame": None, "frame_what": frame, "tick": None, "load": None}
+    if body:
+        summary["frame"] = max(sum(ins) for ins, _, _ in body)
+    h_sum = max(sum(ins) - sum(emu) for ins, _, emu in handler) if handler else None
+    if body and handler:
+        b_sum = summary["frame"]
+        nbytes = len(handler[0][0])
+        rate = cfg["rate"]
+        cyc = rate * h_sum * CPI
+        period = F_CPU / rate
+        most = LINK_BAUD_BYTES // nbytes
+        out.append(f"Per received {frame} frame: **{b_sum} instructions** in the link body ({nbytes} calls), "
+                   f"**{h_sum}** in the `link_usart` handler ({nbytes} interrupts: RTIC's entry and exit, "
+                   f"the UART read, the transmit pump, and the body). The host sends {rate} frames/s: "
+                   f"{rate} × {h_sum} = {rate * h_sum:,} instructions/s, {cyc:,.0f} cycles/s at {CPI} cycles "
+                   f"per instruction, **{100 * cyc / F_CPU:.2f} %** of 168 MHz; one frame takes "
+                   f"{h_sum * CPI / F_CPU * 1e6:.0f} µs of its {1e3 / rate:.0f} ms period ({period:,.0f} cycles). "
+                   f"At the most the link carries ({LINK_BAUD_BYTES:,} bytes/s at 115 200 baud, {most} such "
+                   f"frames/s) it would be {100 * most * h_sum * CPI / F_CPU:.1f} %.")
+        out.append("")
+
+    changes, last = trace_modes(img.log)
+    if last:
+        out.append(f"The firmware's own trace (QEMU's output) over the run: rung changes "
+                   f"{' → '.join(changes)} (`Mode@tick`); at the end {last['valid']} valid frames, "
+                   f"{last['rejected']} refused. The ladder leaves the power-on BRAKE for REDUCED and returns to "
+                   f"NORMAL after a clean window of 1000 ticks; the frames labelled NORMAL were counted "
+                   f"after that change.")
+    got = []
+    for name, r in counts.items():
+        got += serial_frames.replies(profile, bytes.fromhex(r.get("replies", "")))
+    if got:
+        tally = {}
+        for g in got:
+            tally[g] = tally.get(g, 0) + 1
+        out.append("Replies read back from the link during the counted units: "
+                   + ", ".join(f"{k} ×{v}" for k, v in tally.items()) + ".")
+    out.append("")
+
+    bodies(out, counts, cfg["bodies"])
+    for name in (f"{LINK_BODY}, drive", SERIAL_TICK):
+        prof = counts.get(name, {}).get("by_function")
+        if prof:
+            what = " (its worst byte: the one that completes a frame)" if name.startswith(LINK_BODY) else ""
+            out.append(f"{name}{what}:\n")
+            profile_table(out, prof)
+
+    # CPU load.
+    load = Load(out, "###")
+    notes = []
+    status, extra = counts.get(STATUS_TICK), None
+    for task, sym, prio, rate, trigger in cfg["tasks"]:
+        r, b, q = first.get(sym), board.get(sym), qemu.get(sym)
+        n, how = board_estimate(r, b, q) if r and b and q else (None, None)
+        load.row(f"{task} (`{sym}`)", prio, trigger, rate, n, how)
+        if sym == "TIM2" and n is not None:
+            summary["tick"] = max(counts.get(SERIAL_TICK, {}).get("instructions", [0]))
+            if status:
+                extra = max(status["instructions"]) - max(r["instructions"])
+                load.row("watchdog_tick's STATUS (`TIM2`)", prio, "every 100th tick", 10, extra,
+                         f"the STATUS tick ({max(status['instructions'])} measured) less a plain tick's "
+                         f"{max(r['instructions'])}: encoding and queueing the frame, the whole frame "
+                         f"written by QEMU's USART at once")
+        if sym == "TIM3" and n is not None:
+            adc = ADC_CYCLES / ADC_HZ * F_CPU
+            load.row("imu_read: battery conversion (`TIM3`)", prio, "each run", rate, None,
+                     f"the polled wait for ADC1: {ADC_CYCLES} ADC cycles at {ADC_HZ / 1e6:.0f} MHz "
+                     f"(QEMU's ADC never ends a conversion: count.py sets the flag at the first poll)",
+                     cycles=adc)
+            i2c = I2C_BITS / I2C_HZ * F_CPU
+            load.row("imu_read: MPU6050 read (`TIM3`)", prio, "each run", rate, None,
+                     f"**not measured** (QEMU has no I2C model; the `qemu` build's sensor is absent): "
+                     f"{I2C_BITS} bit times at {I2C_HZ / 1e3:.0f} kHz, the blocking HAL polling throughout",
+                     cycles=i2c)
+            if extra is not None:
+                load.row("imu_read: IMU_MPU6050 frame (`TIM3`)", prio, "each run", rate, extra,
+                         "**not measured** (no reading, no frame under QEMU): taken as the STATUS "
+                         "frame's cost above (26 bytes against 16)")
+    if handler:
+        nbytes = len(handler[0][0])
+        load.row("link_usart, receive (`USART1`)", 2, f"{cfg['rate']} {frame.split()[0]} frames/s "
+                 f"({cfg['rate'] * nbytes} bytes/s)", cfg["rate"], h_sum,
+                 f"per frame: the handler over its {nbytes} bytes, measured (one interrupt per byte)")
+    idle = counts.get(LINK_IDLE)
+    if idle:
+        sent = sum(n * per_s for _, n, per_s in cfg["sent"])
+        what = " + ".join(f"{name} {n} B × {per_s}/s" for name, n, per_s in cfg["sent"])
+        load.row("link_usart, transmit (`USART1`)", 2, f"TXE, one per byte sent ({what})", sent,
+                 max(idle["instructions"]),
+                 "the handler with nothing received or queued (measured, pended through the NVIC), per "
+                 "byte; the byte's own pop and write are counted where QEMU ran them, in the task that "
+                 "queued the frame (QEMU's USART takes a whole frame at once, so it never raises TXE)")
+    total, sporadic = load.end()
+    summary["load"] = 100 * total / F_CPU
+    if sporadic:
+        notes.append(f"{', '.join(f'`{t}`' for t in sporadic)} runs once per input edge, not at a rate, "
+                     "and is left out of the total.")
+    notes.append("Handlers: the `qemu` build's, measured, with the board build's handler code put in place "
+                 "of the emulator's as for `amr-spi` (the serial images' handlers differ only in the "
+                 "trace printing, run through uncounted). A frame that the ladder refuses, or one that "
+                 "changes the rung, costs a trace record more (see `amr-spi`'s trace unit).")
+    for n in notes:
+        out.append(n)
+        out.append("")
+    out.append(img.stack)
+    out.append("")
+    return summary
+
+
+def overview(out, figures):
+    """One row per image."""
+    out.append("## Every image\n")
+    out.append("| image | flash, bytes | static RAM, bytes | per received frame, instructions | "
+               "tick body, instructions | CPU load (periodic tasks, 168 MHz) |")
+    out.append("|---|---|---|---|---|---|")
+    for profile, img, f in figures:
+        frame = f"{f['frame']} ({f['frame_what']})" if f["frame"] is not None else "not measured"
+        tick = f["tick"] if f["tick"] is not None else "not measured"
+        load = f"{f['load']:.1f} %" if f["load"] is not None else "–"
+        out.append(f"| `{profile}` | {img.flash} | {img.ram} | {frame} | {tick} | {load} |")
+    out.append("")
+    out.append("The `amr-spi` image (seed 000, SPI) comes first, in the sections below as before; the")
+    out.append("serial images follow, each in its own section. Per received frame: `amr-spi`'s receive")
+    out.append("unit; the serial images' link body summed over one frame's bytes.\n")
+
+
+def main(d, *profiles):
+    out = []
+    out.append("# Firmware budgets\n")
+    out.append("Regenerate with `bash firmware/budget/run.sh` (board build sizes; instruction counts of the")
+    out.append("`qemu` build's Cortex-M4 code under QEMU netduinoplus2, single-stepped by gdb; the board")
+    out.append("build's handlers from its disassembly).\n")
+    images = [(p, Image(os.path.join(d, p))) for p in profiles]
+    sections, figures = [], []
+    for p, img in images:
+        part = []
+        figures.append((p, img, amr_spi(part, img) if p == "amr-spi" else serial(part, p, img)))
+        sections += part
+    overview(out, figures)
+    print("\n".join(out + sections))
 
 
 if __name__ == "__main__":
-    main(*sys.argv[1:5])
+    main(*sys.argv[1:])

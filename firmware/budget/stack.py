@@ -1,7 +1,8 @@
 #!/usr/bin/env python3
 """Worst-case stack per task of the firmware ELF, from the compiler's frame sizes and the call graph.
 
-Usage: stack.py ELF > stack.md   (ELF built with `-Z emit-stack-sizes`; see stack.sh)
+Usage: stack.py ELF [PROFILE] > stack.md   (ELF built with `-Z emit-stack-sizes`, see stack.sh; PROFILE
+names the image's tasks: amr-spi (the default), cdc or teensy)
 
 - Frame sizes: the `.stack_sizes` section (LLVM writes, per function, its address and the bytes its
   prologue reserves). Functions without an entry (assembly, and `compiler_builtins`, which is not
@@ -18,21 +19,35 @@ import sys
 import tempfile
 import os
 
-ROOTS = [
-    # (vector / symbol, task, priority); thread mode first. Priorities are RTIC's (higher preempts
-    # lower); the fault handlers' negative numbers only order them above every task.
-    ("main", "init + idle (thread mode)", 0),
-    ("TIM2", "watchdog_tick", 2),
-    ("DMA1_STREAM3", "spi_dma_done", 2),
-    ("EXTI15_10", "spi_nss_rise", 2),
-    ("TIM5", "speed_pid", 3),
-    ("ADC", "current_loop", 4),
-    ("EXTI4", "estop_input", 5),
+# Per image: (vector / symbol, task, priority); thread mode first. Priorities are RTIC's (higher
+# preempts lower); the fault handlers' negative numbers only order them above every task.
+THREAD = [("main", "init + idle (thread mode)", 0)]
+FAULTS = [
     ("NonMaskableInt", "NMI handler (clock security system)", -2),
     ("HardFault", "HardFault handler", -1),
 ]
-# RTIC task priorities (the rest are thread mode and the fault handlers).
-TASK_PRIORITIES = {p for _, _, p in ROOTS if p > 0}
+ROOTS_BY_PROFILE = {
+    "amr-spi": THREAD + [
+        ("TIM2", "watchdog_tick", 2),
+        ("DMA1_STREAM3", "spi_dma_done", 2),
+        ("EXTI15_10", "spi_nss_rise", 2),
+        ("TIM5", "speed_pid", 3),
+        ("ADC", "current_loop", 4),
+        ("EXTI4", "estop_input", 5),
+    ] + FAULTS,
+    "cdc": THREAD + [
+        ("TIM3", "imu_read", 1),
+        ("TIM2", "watchdog_tick", 2),
+        ("USART1", "link_usart", 2),
+        ("EXTI4", "estop_input", 5),
+    ] + FAULTS,
+    "teensy": THREAD + [
+        ("TIM2", "watchdog_tick", 2),
+        ("USART1", "link_usart", 2),
+        ("TIM5", "step_gen", 3),
+        ("EXTI4", "estop_input", 5),
+    ] + FAULTS,
+}
 # Hardware exception frame per preemption: 8 words, 26 with the FPU context (lazy stacking reserves
 # it when the interrupted code used the FPU), plus 4 bytes of alignment padding.
 EXC_FRAME = 26 * 4 + 4
@@ -131,7 +146,10 @@ def prologue_bytes(insns):
     return total
 
 
-def main(elf):
+def main(elf, profile="amr-spi"):
+    roots = ROOTS_BY_PROFILE[profile]
+    # RTIC task priorities (the rest are thread mode and the fault handlers).
+    task_priorities = {p for _, _, p in roots if p > 0}
     sizes = stack_sizes(elf)
     fns, by_name = functions(elf)
     code = disassemble(elf)
@@ -256,20 +274,24 @@ def main(elf):
         return " → ".join(
             f"`{brief(a)}` {frame[a]}" + ("*" if source[a] == "prologue" else "") for a in chain)
 
-    out = ["## Worst-case stack per task\n"]
-    out.append("Computed by `firmware/budget/stack.sh` from the board build (the pinned compiler, `cargo fw`'s")
-    out.append("profile, plus `-Z emit-stack-sizes` allowed by `RUSTC_BOOTSTRAP=1`): per-function frame sizes")
-    out.append("from the `.stack_sizes` section (or, marked *prologue*, read from the function's prologue), call")
-    out.append("graph from the disassembly (direct calls and tail calls; a tail call counted as nested, an")
-    out.append("over-estimate). *Without panics* leaves out every call into `core::panicking` (a panic resets")
-    out.append("the MCU; see below); *with panics* follows them once around the panic handler.\n")
+    if profile == "amr-spi":
+        out = ["## Worst-case stack per task\n"]
+        out.append("Computed by `firmware/budget/stack.sh` from the board build (the pinned compiler, `cargo fw`'s")
+        out.append("profile, plus `-Z emit-stack-sizes` allowed by `RUSTC_BOOTSTRAP=1`): per-function frame sizes")
+        out.append("from the `.stack_sizes` section (or, marked *prologue*, read from the function's prologue), call")
+        out.append("graph from the disassembly (direct calls and tail calls; a tail call counted as nested, an")
+        out.append("over-estimate). *Without panics* leaves out every call into `core::panicking` (a panic resets")
+        out.append("the MCU; see below); *with panics* follows them once around the panic handler.\n")
+    else:
+        out = ["### Worst-case stack per task\n"]
+        out.append(f"Computed as for `amr-spi` above, from the `{profile}` board image.\n")
     out.append("| task | priority | worst-case bytes without panics | deepest chain (bytes per frame) | "
                "with panics | indirect calls met |")
     out.append("|---|---|---|---|---|---|")
     per_level = {}
     rows_ind = set()
     missing = []
-    for sym, task, prio in ROOTS:
+    for sym, task, prio in roots:
         addr = by_name.get(sym)
         if addr is None:
             missing.append(sym)
@@ -317,13 +339,13 @@ def main(elf):
     safe_cycles = {a for a in fns if pretty(a) in safe.cycles}
     clean_tasks = True
     panicking_tasks = []
-    for sym, task, prio in ROOTS:
+    for sym, task, prio in roots:
         if sym not in by_name:
             continue
         r, rs = full.reach(by_name[sym]), safe.reach(by_name[sym])
         flags = [bool(r & panics), bool(r & cycle_addrs), unresolved(r)]
         safe_flags = [bool(rs & safe_cycles), unresolved(rs)]
-        if prio in TASK_PRIORITIES:
+        if prio in task_priorities:
             clean_tasks &= not any(safe_flags)
             if flags[0]:
                 panicking_tasks.append(sym)
@@ -331,8 +353,8 @@ def main(elf):
                    + " / ".join("yes" if f else "no" for f in safe_flags) + " |")
     # Where the tasks' paths reach a panic: the callers of `core::panicking` reached from a task.
     task_reach = set()
-    for sym, _, prio in ROOTS:
-        if prio in TASK_PRIORITIES and sym in by_name:
+    for sym, _, prio in roots:
+        if prio in task_priorities and sym in by_name:
             task_reach |= safe.reach(by_name[sym])
     sites = sorted({brief(a) for a in task_reach if callees.get(a, set()) & panics})
     out.append("")
@@ -352,7 +374,7 @@ def main(elf):
                    + "; the calls into `core::panicking` on their paths are in " + ", ".join(f"`{s}`" for s in sites)
                    + ".")
     if clean_tasks:
-        out.append(f"Without panics the {len([r for r in ROOTS if r[2] in TASK_PRIORITIES])} tasks reach no cycle "
+        out.append(f"Without panics the {len([r for r in roots if r[2] in task_priorities])} tasks reach no cycle "
                    "and no unresolved indirect call (table above), so those figures are complete bounds.")
     else:
         out.append("A TASK REACHES A CYCLE OR AN UNRESOLVED INDIRECT CALL WITHOUT PANICS (table above): its "
@@ -362,7 +384,7 @@ def main(elf):
         out.append("Roots not found in the ELF: " + ", ".join(missing))
     on_chains = set()
     for g in (safe, full):
-        for sym, _, _ in ROOTS:
+        for sym, _, _ in roots:
             if sym in by_name and by_name[sym] in g.memo:
                 on_chains |= set(g.memo[by_name[sym]][1])
     no_entry = sorted(pretty(a) for a in on_chains if source.get(a) == "prologue")
@@ -373,4 +395,4 @@ def main(elf):
 
 
 if __name__ == "__main__":
-    main(sys.argv[1])
+    main(*sys.argv[1:3])
