@@ -220,3 +220,40 @@ fn a_cal_before_the_first_move_still_rearms_within_the_threshold() {
         Mode::Brake
     );
 }
+
+#[test]
+fn brake_halts_the_motors_and_the_profiles_restart_from_them() {
+    let cfg = Config::TEENSY;
+    let mut j = Joints::new([Position::ZERO; JOINTS], &cfg);
+    let mut g = StepGen::new([0; JOINTS]);
+    let run = Drive::Run(
+        [AxisDrive::Position {
+            target: Position::from_num(3),
+            cap: Speed::from_num(10),
+        }; JOINTS],
+    );
+    for _ in 0..200 {
+        drive_joints(&mut j, &mut g, &run, false);
+        // Ten step-generator runs per tick.
+        for _ in 0..10 {
+            g.run();
+        }
+    }
+    // Moving: the next tick's target is ahead of the motors.
+    drive_joints(&mut j, &mut g, &run, false);
+    let at = g.position();
+    let t = drive_joints(&mut j, &mut g, &Drive::Brake, false);
+    assert_eq!(t, at, "halted where the motors stand");
+    assert_eq!(g.run(), [StepPulse::Idle; JOINTS]);
+    assert_eq!(
+        j.step_targets(),
+        at,
+        "the references restart from the motors"
+    );
+    // An ESTOP press not yet latched halts the same way.
+    let mut g2 = StepGen::new([0; JOINTS]);
+    let t = drive_joints(&mut j, &mut g2, &run, true);
+    assert_eq!(t, [0; JOINTS]);
+    // 1 rad = 254.6 steps; back and forth within one step.
+    assert_eq!(steps_of(rad_of(255)), 255);
+}
