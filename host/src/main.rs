@@ -236,7 +236,7 @@ enum Cmd {
     /// timeout from one frame period to 65535 ms, 0 < hz <= 1000.
     ///
     /// --enable: MOTOR_ENABLE 1 right after the first frame, its ACK awaited while the frames keep
-    /// coming (the board keeps a re-arm only while frames are fresh); refused: stop sending, exit 1;
+    /// coming (the board keeps a re-arm only until the first frame, at most 249 ms); refused: stop sending, exit 1;
     /// no ACK within --wait-ms: stop sending, exit 3.
     ///
     /// First line {"sending":{..},"frames":..,"hz":..,"enable":..}; last line {"verdict":..,

@@ -17,12 +17,12 @@
 //! The verdict is the exit status ([`Verdict::exit_code`]); an argument, open or I/O error is the
 //! `Err` of the verb and exits with [`EXIT_ERROR`].
 //!
-//! Leaving BRAKE (seed 001 `drive --enable`, seed 003 `move --cal`): the board's ladder keeps a
-//! re-arm pending only while its last valid frame is younger than the comm-loss threshold; every
-//! tick past that threshold withdraws it. A re-arm sent after a silence, then answered, then followed
-//! by frames, is withdrawn at the first tick, long before the frames arrive. So the paced verbs send
-//! one frame first, the re-arm right after it, and keep the frames coming while the re-arm's reply
-//! travels back; the reply is checked inside the paced loop:
+//! Leaving BRAKE (seed 001 `drive --enable`, seed 003 `move --cal`): the board leaves BRAKE at a
+//! tick after a re-arm and a fresh enabled frame. Its `MOTOR_ENABLE 1` / `CAL` carries a coasting
+//! frame, so a re-arm waits for the first command frame for up to the board's BRAKE threshold
+//! (249 ms) and lapses after it. The paced verbs do not rely on that window: they send one frame
+//! first, the re-arm right after it, and keep the frames coming while the re-arm's reply travels
+//! back; the reply is checked inside the paced loop:
 //!
 //! ```text
 //!  host   PWM ─ ENABLE 1 ─────── PWM ──────── PWM ──────── PWM ...   (every 1/hz, absolute deadlines)
