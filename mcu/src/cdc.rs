@@ -13,9 +13,9 @@
 //!
 //! | received        | ladder event ([`protocol::cdc::Message::to_event`])   | reply                     |
 //! |-----------------|--------------------------------------------------------|---------------------------|
-//! | `SET_MOTOR_PWM` | four duty/coast axes, `timeout_ms` as the comm-loss threshold | none (the seed: no ACK for the 50 Hz frame) |
-//! | `MOTOR_ENABLE 1`| `Rearm(Primary)`: BRAKE is left only with no latching cause | `ACK(0x02, 0)` if armed, else `ACK(0x02, 1)` |
-//! | `MOTOR_ENABLE 0`| a frame of four coasting axes with enable 0 (STOP)     | `ACK(0x02, 0)` / `(0x02, 1)` |
+//! | `SET_MOTOR_PWM` | four duty/coast axes, `timeout_ms` as the comm-loss threshold; after `MOTOR_ENABLE 0`, until `MOTOR_ENABLE 1`, four coasting axes with enable 0 and the same `timeout_ms` | none (the seed: no ACK for the 50 Hz frame) |
+//! | `MOTOR_ENABLE 1`| `Rearm(Primary)`: BRAKE is left only with no latching cause; the frames drive again | `ACK(0x02, 0)` if armed, else `ACK(0x02, 1)` |
+//! | `MOTOR_ENABLE 0`| a frame of four coasting axes with enable 0 (STOP), and every later frame too until `MOTOR_ENABLE 1` | `ACK(0x02, 0)` / `(0x02, 1)` |
 //! | `ESTOP 1`       | `Estop(Primary, Engage)`: BRAKE latched at once          | `ACK(0x03, 0)`            |
 //! | `ESTOP 0`       | `Estop(Primary, Release)`: releases the link's own ESTOP; the drive stays braked until `MOTOR_ENABLE 1` | `ACK(0x03, 0)`, or `(0x03, 1)` if refused |
 //! | `PING`          | none                                                   | a `STATUS` at once        |
@@ -23,6 +23,12 @@
 //!
 //! ACK `result`: [`ACK_OK`] when the event took effect, [`ACK_REFUSED`] when the safety core
 //! refused it (a latching cause still active, an ESTOP owned by another source, an invalid frame).
+//!
+//! The seed's `MOTOR_ENABLE`: "0 = disabled (outputs forced to 0), 1 = enabled (lets
+//! `SET_MOTOR_PWM` take effect)". The disable therefore lasts until the next `MOTOR_ENABLE 1`,
+//! not until the next 50 Hz frame: while disabled, each `SET_MOTOR_PWM` still counts as a valid
+//! frame (the link is alive, its `timeout_ms` still bounds a loss) but asks for nothing but STOP
+//! with the motors coasting. Power-on counts as disabled; the drive is braked then anyway.
 //!
 //! # Motor outputs (TB6612-style driver: IN1, IN2 and a PWM input per motor)
 //!
@@ -38,7 +44,9 @@ use crate::serial::TxQueue;
 use protocol::cdc::{
     self, Ack, ErrorCode, Imu, Message, MsgId, Status, StatusFlags, StreamDecoder,
 };
-use statemachine::{AxisDrive, Drive, FaultFlags, Mode, Output, Source};
+use statemachine::{
+    AxisCommand, AxisDrive, Command, Drive, Event, FaultFlags, Mode, Output, Source,
+};
 
 /// Motors of the seed 001 board (TIM8 CH1 … CH4).
 pub const MOTORS: usize = 4;
@@ -71,6 +79,8 @@ pub struct CdcLinkTask {
     pub tx: TxQueue<TX_CAP>,
     last_error: Option<ErrorCode>,
     status_due: u32,
+    /// The host's last `MOTOR_ENABLE` (false from power-on until the first `MOTOR_ENABLE 1`).
+    enabled: bool,
 }
 
 impl Default for CdcLinkTask {
@@ -87,7 +97,13 @@ impl CdcLinkTask {
             tx: TxQueue::new(),
             last_error: None,
             status_due: 0,
+            enabled: false,
         }
+    }
+
+    /// True between a `MOTOR_ENABLE 1` and the next `MOTOR_ENABLE 0`: `SET_MOTOR_PWM` drives.
+    pub const fn motors_enabled(&self) -> bool {
+        self.enabled
     }
 
     /// The stream decoder's counters.
@@ -111,6 +127,9 @@ impl CdcLinkTask {
                 None
             }
             Ok(m @ (Message::MotorEnable(_) | Message::Estop(_))) => {
+                if let Message::MotorEnable(on) = m {
+                    self.enabled = on;
+                }
                 let event = m.to_event()?;
                 let before = *safety.ladder().counters();
                 let out = safety.step(event);
@@ -118,7 +137,20 @@ impl CdcLinkTask {
                 self.ack(m.id(), ok);
                 Some(out)
             }
-            Ok(m @ Message::SetMotorPwm(_)) => m.to_event().map(|e| safety.step(e)),
+            Ok(Message::SetMotorPwm(p)) => {
+                let cmd = p.to_command();
+                let cmd = if self.enabled {
+                    cmd
+                } else {
+                    // Disabled: the frame keeps the link alive and its timeout, nothing more.
+                    Command {
+                        axes: [AxisCommand::COAST; MOTORS],
+                        enable: false,
+                        ..cmd
+                    }
+                };
+                Some(safety.step(Event::Frame(cmd)))
+            }
             // Messages only the MCU sends: a host that sends them is confused.
             Ok(Message::Ack(_) | Message::Imu(_) | Message::Status(_)) => {
                 Some(self.refuse(safety, cdc::Error::UnknownMsg))
