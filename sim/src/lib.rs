@@ -18,6 +18,8 @@ pub mod report;
 pub mod rng;
 pub mod runner;
 pub mod scenario;
+pub mod skid;
+pub mod wire;
 
 pub use host::HostModel;
 pub use runner::{run, RunOptions, RunResult, Summary};
