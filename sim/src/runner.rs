@@ -18,7 +18,7 @@ use crate::board::SimBoard;
 use crate::host::HostModel;
 use crate::plant::{BridgeDrive, Plant};
 use crate::rng::Rng;
-use crate::scenario::{Fault, Request, Scenario};
+use crate::scenario::{Fault, Profile, Request, Scenario};
 
 /// MCU step: the 20 kHz current loop.
 pub const STEP_S: f64 = 50e-6;
@@ -47,9 +47,23 @@ pub fn mode_name(m: Mode) -> &'static str {
     }
 }
 
-/// Per-tick series for plots.
+/// A plot panel of named signals over the series' time.
+#[derive(Clone, Debug, Default)]
+pub struct Panel {
+    /// Caption.
+    pub caption: String,
+    /// (name, one value per time of the series).
+    pub signals: Vec<(String, Vec<f64>)>,
+}
+
+/// Per-tick series for plots. The seed 000 run fills the wheel, command and setpoint series; the
+/// serial profiles put their own signals in `lines` instead.
 #[derive(Clone, Debug, Default)]
 pub struct Series {
+    /// The first panel, when not the wheel speeds.
+    pub lines: Option<Panel>,
+    /// The profile's HOLD, STOP and BRAKE ages, ticks (seed 000's when `None`).
+    pub thresholds: Option<[u16; 3]>,
     /// Time, s.
     pub t: Vec<f64>,
     /// True wheel speeds, rad/s.
@@ -125,6 +139,41 @@ pub struct Summary {
     pub clock_err_max_us: Option<f64>,
     /// The seed estimator's error at the end, µs.
     pub seed_clock_err_final_us: Option<f64>,
+    /// The board and link (`amr-spi`, `cdc`, `teensy`).
+    pub profile: String,
+    /// Serial profiles: first comm-loss BRAKE, in the board's ticks since the tick count at the
+    /// last valid frame.
+    pub brake_after_last_frame_ticks: Option<u32>,
+    /// Serial profiles: replies the host decoded and frames it could not decode.
+    pub replies: Option<[u64; 2]>,
+    /// Serial profiles: replies that were not what the host expected (ACK results, echoes), and
+    /// expected replies that never came.
+    pub reply_failures: Vec<String>,
+    /// Serial profiles: ticks at which BRAKE was left without a re-arm message delivered since
+    /// the latch.
+    pub rearm_violations: u64,
+    /// Serial profiles: replies dropped by the board because its transmit queue was full.
+    pub tx_dropped: u64,
+    /// Seed 001: time from the last byte of each `ESTOP 1` to every motor shorted, the largest, ms.
+    pub estop_brake_ms: Option<f64>,
+    /// Seed 001: largest |duty| applied from the first tick after a `MOTOR_ENABLE 0` reached the
+    /// board until the next `MOTOR_ENABLE 1` (must be 0: the seed's "outputs forced to 0").
+    pub duty_while_disabled: Option<f64>,
+    /// Seed 001: IMU frames whose values saturated (the seed's i16 mdps ends at ±32.767 dps).
+    pub imu_saturated: u64,
+    /// Seed 001: largest difference between a decoded IMU frame and the true motion at its time
+    /// (mg, mdps), unsaturated frames.
+    pub imu_max_err: Option<[f64; 2]>,
+    /// Seed 003: largest distance of a joint from its commanded angle at the end of an accepted
+    /// move, steps.
+    pub joint_err_steps: Option<f64>,
+    /// Seed 003: largest joint speed above the command's cap (ramped down at the profile's
+    /// acceleration after a lower cap), steps per tick.
+    pub joint_speed_excess_steps: Option<f64>,
+    /// Seed 003: largest |joint angle|, rad.
+    pub joint_max_abs_rad: Option<f64>,
+    /// Seed 003: step pulses issued after the first comm-loss BRAKE.
+    pub steps_after_brake: Option<u64>,
 }
 
 impl Summary {
@@ -143,12 +192,96 @@ impl Summary {
         let mut bad = Vec::new();
         // SR-16: every comm-loss BRAKE reaches the bridge strictly within the profile's bound of the
         // last valid frame (10 ms for seed 000), whatever the scenario expects besides.
-        let bound = f64::from(mcu::tuning::AMR.ladder.comm_loss_bound_ms());
+        let bound = sc.comm_loss_bound_ms();
         if let Some(x) = self.bridge_brake_after_last_frame_ms {
             if x >= bound {
                 bad.push(format!(
                     "bridge braked {x:.3} ms after the last valid frame: the profile's bound is < {bound} ms"
                 ));
+            }
+        }
+        // The same in the board's own ticks: BRAKE at tick n after the frame is within n ms.
+        if let Some(n) = self.brake_after_last_frame_ticks {
+            if f64::from(n) >= bound {
+                bad.push(format!(
+                    "BRAKE {n} ticks after the last valid frame: the profile's bound is < {bound} ms"
+                ));
+            }
+            if let Some([lo, hi]) = e.brake_after_last_frame_ticks {
+                if n < lo || n > hi {
+                    bad.push(format!(
+                        "BRAKE after last frame: expected {lo}..{hi} ticks, got {n}"
+                    ));
+                }
+            }
+        } else if e.brake_after_last_frame_ticks.is_some() {
+            bad.push("no comm-loss BRAKE measured in ticks".into());
+        }
+        if let Some([ok, broken]) = self.replies {
+            if broken > 0 {
+                bad.push(format!(
+                    "the host could not decode {broken} of {} replies",
+                    ok + broken
+                ));
+            }
+        }
+        bad.extend(self.reply_failures.iter().cloned());
+        if self.rearm_violations > 0 {
+            bad.push(format!(
+                "BRAKE left {} times without a re-arm since the latch",
+                self.rearm_violations
+            ));
+        }
+        if self.tx_dropped > 0 {
+            bad.push(format!("{} replies dropped by the board", self.tx_dropped));
+        }
+        if let Some(d) = self.duty_while_disabled {
+            if d > 0.0 {
+                bad.push(format!(
+                    "motors driven at duty {d} after MOTOR_ENABLE 0, before MOTOR_ENABLE 1"
+                ));
+            }
+        }
+        if let Some(max) = e.max_speed_at_onset_mps {
+            match self.speed_at_onset {
+                Some(v) if v.abs() <= max => {}
+                other => bad.push(format!(
+                    "speed at the onset: expected ≤ {max} m/s, got {other:?}"
+                )),
+            }
+        }
+        if e.estop_brakes_at_once && self.estop_brake_ms != Some(0.0) {
+            bad.push(format!(
+                "ESTOP must short every motor in the step it arrived: {:?} ms",
+                self.estop_brake_ms
+            ));
+        }
+        if let Some(x) = self.joint_speed_excess_steps {
+            if x > 1.0 {
+                bad.push(format!(
+                    "a joint exceeded its cap by {x} steps per tick (tolerance 1)"
+                ));
+            }
+        }
+        if let Some(x) = self.joint_max_abs_rad {
+            if x > core::f64::consts::PI {
+                bad.push(format!("a joint reached {x} rad, beyond ±π"));
+            }
+        }
+        if let Some(max) = e.max_joint_error_steps {
+            match self.joint_err_steps {
+                Some(x) if x <= max => {}
+                other => bad.push(format!(
+                    "joint error at the end of a move: expected ≤ {max} steps, got {other:?}"
+                )),
+            }
+        }
+        if let Some(max) = e.max_steps_after_brake {
+            match self.steps_after_brake {
+                Some(x) if x <= max => {}
+                other => bad.push(format!(
+                    "steps after BRAKE: expected ≤ {max}, got {other:?}"
+                )),
             }
         }
         if let Some([lo, hi]) = e.brake_after_last_frame_ms {
@@ -225,30 +358,48 @@ struct Transfer {
 }
 
 /// Flips bits or overwrites a burst of bytes, as EMI does. Returns true if the frame changed.
-pub fn corrupt(frame: &mut [u8; FRAME_LEN], rng: &mut Rng) -> bool {
-    let before = *frame;
+pub fn corrupt(frame: &mut [u8], rng: &mut Rng) -> bool {
+    let before = frame.to_vec();
+    let len_total = frame.len();
+    if len_total == 0 {
+        return false;
+    }
     if rng.chance(0.5) {
         let n = 1 + rng.below(4);
         for _ in 0..n {
-            let bit = rng.below(FRAME_LEN as u64 * 8) as usize;
+            let bit = rng.below(len_total as u64 * 8) as usize;
             frame[bit / 8] ^= 1 << (bit % 8);
         }
     } else {
-        let len = 1 + rng.below(8) as usize;
-        let start = rng.below((FRAME_LEN - len + 1) as u64) as usize;
+        let len = (1 + rng.below(8) as usize).min(len_total);
+        let start = rng.below((len_total - len + 1) as u64) as usize;
         for b in &mut frame[start..start + len] {
             *b = rng.next_u64() as u8;
         }
     }
-    *frame != before
+    *frame != before[..]
 }
 
 fn in_window(t: f64, at: f64, dur: f64) -> bool {
     t >= at && t < at + dur
 }
 
-/// Runs `sc` against `host`; writes the CSV trace to `trace` if given.
+/// Runs `sc` against `host`; writes the CSV trace to `trace` if given. `host` is the seed 000
+/// host; the serial profiles run their own scripted hosts ([`crate::cdc`], [`crate::teensy`]).
 pub fn run<H: HostModel>(
+    sc: &Scenario,
+    host: &mut H,
+    opts: RunOptions,
+    trace: Option<&mut dyn Write>,
+) -> std::io::Result<RunResult> {
+    match sc.profile {
+        Profile::AmrSpi => run_amr(sc, host, opts, trace),
+        Profile::Cdc => crate::cdc::run(sc, opts, trace),
+        Profile::Teensy => crate::teensy::run(sc, opts, trace),
+    }
+}
+
+fn run_amr<H: HostModel>(
     sc: &Scenario,
     host: &mut H,
     opts: RunOptions,
@@ -291,6 +442,7 @@ pub fn run<H: HostModel>(
     let onset = sc.fault_onset();
     let mut s = Summary {
         name: sc.name.clone(),
+        profile: sc.profile.name().into(),
         onset_s: onset,
         ..Summary::default()
     };

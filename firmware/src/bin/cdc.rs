@@ -3,7 +3,8 @@
 //!
 //! ```text
 //!  priority 5  estop_input    EXTI4 (PD4, both edges)  mcu::EstopInput::edge_then  every motor shorted in the handler
-//!  priority 2  link_usart     USART1 (RXNE, TXE)       mcu::cdc::CdcLinkTask::on_byte  byte → ladder → ACK/STATUS queued
+//!  priority 2  link_usart     USART1 (RXNE, TXE)       mcu::cdc::CdcLinkTask::on_byte  byte → ladder → ACK/STATUS queued;
+//!                                                       mcu::cdc::outputs_after_frame   a frame that braked (ESTOP): motors shorted at once
 //!  (priority 2  link_usb      OTG_FS, feature `usb`:   the same body over USB CDC ACM)
 //!  priority 2  watchdog_tick  TIM2 update      1 kHz   mcu::serial::tick, mcu::cdc::motor_outputs  → CCR, IN1/IN2, IWDG
 //!  priority 1  imu_read       TIM3 update    100 Hz    mcu::cdc::imu_from_raw  MPU6050, battery → IMU_MPU6050
@@ -11,8 +12,8 @@
 //! ```
 //!
 //! The ladder (`mcu::Safety<4>`) is shared only by the two priority-2 tasks, which never preempt
-//! each other (`#[lock_free]`). A frame never moves the motors: only the tick writes their outputs;
-//! the ESTOP handler can only short them.
+//! each other (`#[lock_free]`). A frame never moves the motors: only the tick drives them; the ESTOP
+//! handler and a frame that braked the ladder (`ESTOP 1`) can only short them.
 #![no_std]
 #![no_main]
 #![deny(unsafe_code)]
@@ -24,7 +25,10 @@ mod app {
     use firmware::board::cdc::{self, Imu, Motors, Port, Vbat, PWM_FULL};
     use firmware::board::trace::Trace;
     use firmware::board::{self, EstopPin, Iwdg, Periodic};
-    use mcu::cdc::{imu_from_raw, motor_outputs, BoardStatus, CdcLinkTask, IMU_SCALE, MOTORS};
+    use mcu::cdc::{
+        imu_from_raw, motor_outputs, outputs_after_frame, BoardStatus, CdcLinkTask, IMU_SCALE,
+        MOTORS,
+    };
     use mcu::serial::SerialTickInputs;
     use mcu::{EstopInput, Safety};
     use stm32f4xx_hal::pac;
@@ -109,14 +113,20 @@ mod app {
 
     /// Link bytes in and out. Priority 2, USART1 (RXNE per received byte, TXE while replies wait).
     #[cfg(not(feature = "usb"))]
-    #[task(binds = USART1, priority = 2, shared = [safety, link, port, status])]
+    #[task(binds = USART1, priority = 2, shared = [safety, link, port, status, motors])]
     fn link_usart(cx: link_usart::Context) {
         let safety = cx.shared.safety;
         let mut status = cx.shared.status;
+        let mut motors = cx.shared.motors;
         let st = status.lock(|s| *s);
         (cx.shared.link, cx.shared.port).lock(|link, uart| {
             while let Some(b) = uart.read() {
-                link.on_byte(safety, b, &st);
+                if let Some(m) = link
+                    .on_byte(safety, b, &st)
+                    .and_then(|out| outputs_after_frame(&out, PWM_FULL))
+                {
+                    motors.lock(|motors| motors.set(&m));
+                }
             }
             uart.pump(&mut link.tx);
         });
@@ -124,14 +134,20 @@ mod app {
 
     /// Link bytes in and out over USB (feature `usb`). Priority 2, OTG FS (every USB event).
     #[cfg(feature = "usb")]
-    #[task(binds = OTG_FS, priority = 2, shared = [safety, link, port, status])]
+    #[task(binds = OTG_FS, priority = 2, shared = [safety, link, port, status, motors])]
     fn link_usb(cx: link_usb::Context) {
         let safety = cx.shared.safety;
         let mut status = cx.shared.status;
+        let mut motors = cx.shared.motors;
         let st = status.lock(|s| *s);
         (cx.shared.link, cx.shared.port).lock(|link, usb| {
             usb.poll(|b| {
-                link.on_byte(safety, b, &st);
+                if let Some(m) = link
+                    .on_byte(safety, b, &st)
+                    .and_then(|out| outputs_after_frame(&out, PWM_FULL))
+                {
+                    motors.lock(|motors| motors.set(&m));
+                }
             });
             usb.pump(&mut link.tx);
         });
