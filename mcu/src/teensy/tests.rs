@@ -126,7 +126,10 @@ fn the_arm_moves_to_its_angles_and_brakes_on_comm_loss() {
     // Seed 003's bound: BRAKE strictly within 250 ms of the last frame (the frame came before
     // tick last_frame + 1; BRAKE at its 249th tick); the joints stopped.
     let after = braked_at.expect("BRAKE after the link stopped") - last_frame;
-    assert_eq!(after, 249, "BRAKE at the profile's threshold, not earlier, not later");
+    assert_eq!(
+        after, 249,
+        "BRAKE at the profile's threshold, not earlier, not later"
+    );
     assert_eq!(j.velocities(), [Speed::ZERO; JOINTS]);
 }
 
