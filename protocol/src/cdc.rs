@@ -555,20 +555,25 @@ pub const MIN_FRAME_LEN: usize = HEADER_LEN + CRC_LEN;
 /// bytes after its start, and on a stream of frames without false SOFs only the frame being
 /// received is held.
 ///
-/// Work per byte, worst case: the `MAX_FRAME_LEN − 5` = 256 possible starts compared (up to three
-/// bytes each: a length check, then `AA`, then `55`); a CRC only for each candidate that ends at
-/// this byte, at most 64 of them over 8,384 bytes in all; then at most one move of the bytes held,
-/// dropping those that can no longer start a frame. The 64 need a window crafted for it (false SOFs
+/// Work per byte, worst case: the held bytes' `MAX_FRAME_LEN − 5` = 256 possible starts compared
+/// (a length check, then `AA`, then `55`); a CRC only for each candidate that ends at this byte, at
+/// most 64 of them over 8,384 bytes in all; a walk past the bytes that can no longer start a
+/// frame (each byte is walked past once); and, when the buffer is full, one move of its bytes by
+/// one place (bytes dropped stay where they are until then). The 64 need a window crafted for it (false SOFs
 /// about four bytes apart whose LENs all end at the same byte: two starts ending together are at
 /// least 4 bytes apart, except once 2 for LEN 0x55 and once 3 for LEN 0xAA); the test
 /// `crc_work_per_byte_is_bounded` finds the bound by trying every set of LENs and builds such a
 /// window. A stream of frames without false SOFs costs one CRC per frame, at its last byte.
 #[derive(Clone, Debug)]
 pub struct StreamDecoder {
-    /// The bytes held are `buf[..len]`, from the oldest candidate that can still end (or a lone
-    /// `AA` that may start one) to the last byte pushed; `len <= MAX_FRAME_LEN` always.
+    /// `buf[..len]` are the bytes since the last frame delivered or since the decoder last held
+    /// nothing, at most [`MAX_FRAME_LEN`] of them; the bytes held are `buf[first..len]`, from the
+    /// oldest candidate that can still end (or a lone `AA` that may start one) to the last byte
+    /// pushed. The bytes before `first` are dropped (and counted) but not moved: bytes move only
+    /// when the buffer is full, one place. `first <= len <= MAX_FRAME_LEN` always.
     buf: [u8; MAX_FRAME_LEN],
     len: usize,
+    first: usize,
     stats: Stats,
 }
 
@@ -584,6 +589,7 @@ impl StreamDecoder {
         Self {
             buf: [0; MAX_FRAME_LEN],
             len: 0,
+            first: 0,
             stats: Stats {
                 frames: 0,
                 crc_errors: 0,
@@ -600,19 +606,21 @@ impl StreamDecoder {
 
     /// Bytes held, waiting for the candidates among them to end (at most [`MAX_FRAME_LEN`]).
     pub fn buffered(&self) -> usize {
-        self.len
+        self.len.saturating_sub(self.first)
     }
 
-    /// The bytes held (none if the length were ever out of range, as `drop_front` also treats it).
-    fn held(&self) -> &[u8] {
+    /// `buf[..len]`: the bytes held and the dropped ones before them (none if the length were ever
+    /// out of range).
+    fn bytes(&self) -> &[u8] {
         self.buf.get(..self.len).unwrap_or(&[])
     }
 
     /// Discards the bytes held (e.g. after an inter-byte timeout), counting them as dropped: the
     /// next frame must start at the next byte.
     pub fn reset(&mut self) {
-        self.count_dropped(self.len);
+        self.count_dropped(self.buffered());
         self.len = 0;
+        self.first = 0;
     }
 
     /// Adds one byte; returns the frame that ends at it, a CRC failure, or `None` (the rules are
@@ -626,11 +634,11 @@ impl StreamDecoder {
                 Some(result)
             }
             Completion::BadCrc => {
-                self.trim();
+                self.advance();
                 Some(Err(Error::Crc))
             }
             Completion::Nothing => {
-                self.trim();
+                self.advance();
                 None
             }
         }
@@ -643,11 +651,16 @@ impl StreamDecoder {
 
     fn append(&mut self, byte: u8) {
         if self.len >= MAX_FRAME_LEN {
-            // Unreachable while every `push` trims (a candidate held ends within MAX_FRAME_LEN
-            // bytes of its start, so a full buffer's front is dropped at the byte that fills it);
-            // kept so that no state can make the decoder fail.
-            self.drop_front(1);
-            self.count_dropped(1);
+            // Full: the oldest byte goes. It is a dropped one: a candidate held ends within
+            // MAX_FRAME_LEN bytes of its start, so after the byte that filled the buffer `first`
+            // is past it. Counted if it was held all the same, so that no state can make the
+            // decoder lose count.
+            self.buf.copy_within(1.., 0);
+            self.len = MAX_FRAME_LEN.saturating_sub(1);
+            if self.first == 0 {
+                self.count_dropped(1);
+            }
+            self.first = self.first.saturating_sub(1);
         }
         if let Some(slot) = self.buf.get_mut(self.len) {
             *slot = byte;
@@ -661,7 +674,7 @@ impl StreamDecoder {
         let mut bad_crc = false;
         // A candidate ending at the last byte is at least MIN_FRAME_LEN bytes long.
         let starts = self.len.saturating_add(1).saturating_sub(MIN_FRAME_LEN);
-        for start in 0..starts {
+        for start in self.first..starts {
             match self.candidate_at(start) {
                 Candidate::NotHere => {}
                 Candidate::BadCrc => {
@@ -678,10 +691,10 @@ impl StreamDecoder {
         }
     }
 
-    /// Whether the bytes held from `start` on are a candidate (SOF, and a LEN that makes it end at
-    /// the last byte held), and if so what its CRC and payload say. The CRC is computed only here.
+    /// Whether the bytes from `buf[start]` on are a candidate (SOF, and a LEN that makes it end at
+    /// the last byte), and if so what its CRC and payload say. The CRC is computed only here.
     fn candidate_at(&self, start: usize) -> Candidate {
-        let frame = self.held().get(start..).unwrap_or(&[]);
+        let frame = self.bytes().get(start..).unwrap_or(&[]);
         let [0xAA, 0x55, _, len, ..] = *frame else {
             return Candidate::NotHere;
         };
@@ -694,11 +707,12 @@ impl StreamDecoder {
         }
     }
 
-    /// Delivers the candidate at `start`, which ends at the last byte held: the bytes before it
-    /// are dropped, and every candidate that started before its end goes with it.
+    /// Delivers the candidate at `buf[start]`, which ends at the last byte: the bytes held before
+    /// it are dropped, and every candidate that started before its end goes with it.
     fn deliver(&mut self, start: usize, result: &Result<Message, Error>) {
-        self.count_dropped(start);
+        self.count_dropped(start.saturating_sub(self.first));
         self.len = 0;
+        self.first = 0;
         if result.is_ok() {
             self.stats.frames = self.stats.frames.saturating_add(1);
         } else {
@@ -707,24 +721,18 @@ impl StreamDecoder {
     }
 
     /// Drops the bytes at the front that can no longer start a frame, so that the first byte held
-    /// starts a candidate that can still end (or nothing is held).
-    fn trim(&mut self) {
-        let held = self.held();
-        let dead = (0..held.len())
-            .find(|&i| may_start(held, i))
-            .unwrap_or(held.len());
-        if dead > 0 {
-            self.drop_front(dead);
-            self.count_dropped(dead);
+    /// starts a candidate that can still end (or nothing is held, and the buffer starts over).
+    fn advance(&mut self) {
+        let bytes = self.bytes();
+        let live = (self.first..bytes.len())
+            .find(|&i| may_start(bytes, i))
+            .unwrap_or(bytes.len());
+        self.count_dropped(live.saturating_sub(self.first));
+        self.first = live;
+        if self.first >= self.len {
+            self.len = 0;
+            self.first = 0;
         }
-    }
-
-    /// Removes the first `n` bytes held (all of them if fewer).
-    fn drop_front(&mut self, n: usize) {
-        let held = self.buf.get_mut(..self.len).unwrap_or(&mut []);
-        let n = n.min(held.len());
-        held.copy_within(n.., 0);
-        self.len = held.len().saturating_sub(n);
     }
 
     fn count_dropped(&mut self, n: usize) {

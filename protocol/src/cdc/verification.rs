@@ -204,11 +204,11 @@ pub(crate) fn check_candidate_at(src: &mut impl Source) {
     );
 }
 
-/// One `push` from *any* state (up to a full buffer of any bytes, any counters) never panics,
-/// never overfills, never lowers a counter; a delivered frame leaves nothing held, and otherwise
-/// fewer than `MAX_FRAME_LEN` bytes stay held (so the next byte always fits: `append`'s
-/// defensive drop is unreachable from a state `push` left). `push` has no other loop than its
-/// two scans over the bytes held, so it terminates.
+/// One `push` from *any* state (up to a full buffer of any bytes, any of them already dropped,
+/// any counters) never panics, never overfills, never lowers a counter; a delivered frame leaves
+/// nothing held, and otherwise fewer than `MAX_FRAME_LEN` bytes stay held (so when the next byte
+/// finds the buffer full, the byte it moves out is a dropped one). `push` has no other loops than
+/// its two scans over the buffer, so it terminates.
 pub(crate) fn check_stream_step(src: &mut impl Source) {
     let mut bytes: [u8; MAX_FRAME_LEN] = src.bytes();
     let mut held = usize::from(src.u16_below(MAX_FRAME_LEN as u16 + 1));
@@ -216,6 +216,7 @@ pub(crate) fn check_stream_step(src: &mut impl Source) {
     // frame, also takes a frame of any MSG_ID and any payload of up to 16 bytes, possibly with
     // one byte replaced, that the byte pushed completes.
     let mut byte = src.u8();
+    let mut frame_start = MAX_FRAME_LEN;
     if !cfg!(kani) && src.bool() {
         let mut frame = [0u8; MAX_FRAME_LEN];
         let len = usize::from(src.below(17));
@@ -225,12 +226,14 @@ pub(crate) fn check_stream_step(src: &mut impl Source) {
         }
         // All but its last byte held, the last one pushed.
         held = held.clamp(n - 1, MAX_FRAME_LEN - 1);
-        bytes[held + 1 - n..held].copy_from_slice(&frame[..n - 1]);
+        frame_start = held + 1 - n;
+        bytes[frame_start..held].copy_from_slice(&frame[..n - 1]);
         byte = frame[n - 1];
     }
     let mut dec = StreamDecoder::new();
     dec.buf = bytes;
     dec.len = held;
+    dec.first = usize::from(src.u16_below(held as u16 + 1)).min(frame_start);
     dec.stats = Stats {
         frames: src.u32(),
         crc_errors: src.u32(),
@@ -241,7 +244,7 @@ pub(crate) fn check_stream_step(src: &mut impl Source) {
     let r = dec.push(byte);
     let after = dec.stats;
     check!(
-        dec.buffered() <= MAX_FRAME_LEN,
+        dec.first <= dec.len && dec.len <= MAX_FRAME_LEN,
         "the decoder never holds more than a frame"
     );
     check!(
@@ -274,47 +277,10 @@ pub(crate) fn check_stream_step(src: &mut impl Source) {
     cover!(src, held == MAX_FRAME_LEN, "push into a full buffer");
 }
 
-/// `drop_front(n)` from any state keeps exactly the bytes after the first `n` (none if fewer are
-/// held), in order: the specification that [`model::drop_front`] stands in for.
-pub(crate) fn check_drop_front(src: &mut impl Source) {
-    let mut dec = StreamDecoder::new();
-    dec.buf = src.bytes();
-    dec.len = usize::from(src.u16()) % (MAX_FRAME_LEN + 1);
-    let before = dec.clone();
-    let n = usize::from(src.u16());
-    dec.drop_front(n);
-    let keep = before.len.saturating_sub(n);
-    assert_eq!(dec.buffered(), keep);
-    assert!(dec.stats() == before.stats());
-    // One byte kept, anywhere: it is the byte `n` places further on.
-    let i = usize::from(src.u16()) % MAX_FRAME_LEN;
-    if i < keep {
-        assert_eq!(dec.buf[i], before.buf[i + n]);
-    }
-    cover!(
-        src,
-        n > 0 && keep > 1 && i == keep - 1,
-        "last kept byte moved"
-    );
-    cover!(
-        src,
-        n > before.len && before.len > 0,
-        "more dropped than held"
-    );
-}
-
 /// Stand-ins for the Kani harnesses, each over-approximating a function proven separately.
 #[cfg(kani)]
 pub(crate) mod model {
     use super::*;
-
-    /// [`StreamDecoder::drop_front`] as `check_drop_front` proves it for the length, with any
-    /// bytes kept: for harnesses whose properties do not read the bytes after a drop.
-    pub(crate) fn drop_front(dec: &mut StreamDecoder, n: usize) {
-        let keep = dec.len.saturating_sub(n);
-        dec.buf = kani::any();
-        dec.len = keep;
-    }
 
     /// [`StreamDecoder::candidate_at`] as any verdict at all, for the step harness, whose
     /// properties hold whatever the candidates say (`verify_candidate_at` proves the real one).
@@ -607,9 +573,8 @@ fn sample_of(kind: u8) -> Message {
 /// Totality harnesses replace the CRC by `crc16::verification::model::any_checksum` (any value):
 /// their properties hold whatever the CRC returns, and `crc16::verify_checksum_total` proves the
 /// real one returns for every input. Round trips and bit flips use the real CRC. The stream
-/// decoder is total: `verify_stream_step` proves one `push` from any state, with `drop_front`
-/// replaced by [`model::drop_front`], whose length `verify_drop_front` proves, and
-/// `candidate_at` by [`model::candidate_at`] (any verdict), which `verify_candidate_at` proves.
+/// decoder is total: `verify_stream_step` proves one `push` from any state, with `candidate_at`
+/// replaced by [`model::candidate_at`] (any verdict), which `verify_candidate_at` proves.
 /// `verify_stream_holds_back_no_frame_{ping,estop}` prove the decoder's property with the real CRC
 /// for any 4 bytes before a PING or an ESTOP frame. Those under `cfg_attr(kani_pending, …)` do not
 /// finish yet and run as `cargo test` twins.
@@ -630,18 +595,11 @@ mod proofs {
     }
 
     #[kani::proof]
-    #[kani::unwind(8)]
-    fn verify_drop_front() {
-        check_drop_front(&mut KaniSource);
-    }
-
-    #[kani::proof]
     #[kani::unwind(30)]
     #[kani::stub(
         crate::crc16::checksum,
         crate::crc16::verification::model::any_checksum
     )]
-    #[kani::stub(StreamDecoder::drop_front, super::model::drop_front)]
     #[kani::stub(StreamDecoder::candidate_at, super::model::candidate_at)]
     fn verify_stream_step() {
         check_stream_step(&mut KaniSource);
@@ -661,12 +619,14 @@ mod proofs {
     /// before a PING frame (6 bytes) and before an ESTOP frame (7 bytes).
     #[kani::proof]
     #[kani::unwind(14)]
+    #[kani::stub(crate::crc16::checksum, crate::crc16::verification::seed_loop)]
     fn verify_stream_holds_back_no_frame_ping() {
         check_stream_holds_back_no_frame(&mut KaniSource, &Message::Ping);
     }
 
     #[kani::proof]
     #[kani::unwind(14)]
+    #[kani::stub(crate::crc16::checksum, crate::crc16::verification::seed_loop)]
     fn verify_stream_holds_back_no_frame_estop() {
         check_stream_holds_back_no_frame(&mut KaniSource, &Message::Estop(Estop::Engage));
     }
@@ -783,11 +743,6 @@ mod twins {
             })
             .assert_covered(1);
         }
-    }
-
-    #[test]
-    fn drop_front() {
-        Twin::run(0xC0_0006, 50_000, check_drop_front).assert_covered(2);
     }
 
     #[test]
