@@ -674,7 +674,13 @@ impl StreamDecoder {
         let mut bad_crc = false;
         // A candidate ending at the last byte is at least MIN_FRAME_LEN bytes long.
         let starts = self.len.saturating_add(1).saturating_sub(MIN_FRAME_LEN);
-        for start in self.first..starts {
+        // From 0 rather than from `first`, skipping the dropped bytes: a position that is a
+        // plain count lets Kani's solver read each byte at a fixed place instead of at every
+        // place `first` could be.
+        for start in 0..starts {
+            if start < self.first {
+                continue;
+            }
             match self.candidate_at(start) {
                 Candidate::NotHere => {}
                 Candidate::BadCrc => {
@@ -724,8 +730,10 @@ impl StreamDecoder {
     /// starts a candidate that can still end (or nothing is held, and the buffer starts over).
     fn advance(&mut self) {
         let bytes = self.bytes();
-        let live = (self.first..bytes.len())
-            .find(|&i| may_start(bytes, i))
+        let first = self.first;
+        // From 0, as in `complete`.
+        let live = (0..bytes.len())
+            .find(|&i| i >= first && may_start(bytes, i))
             .unwrap_or(bytes.len());
         self.count_dropped(live.saturating_sub(self.first));
         self.first = live;

@@ -279,7 +279,13 @@ impl<const N: usize> CmdMsg<N> {
         }
         let mut body = [0u8; ROBUST_BODY_BUF];
         let n = unstuff(frame, &mut body).ok_or(RejectReason::Framing)?;
-        Self::decode_body(body.get(..n).ok_or(RejectReason::Framing)?)
+        // `n` is the fixed body length here (the frame's was checked); slicing by the constant
+        // keeps every length below known to Kani's solver, which does not carry `n`'s value over
+        // from the check.
+        if n != robust_body_len(N) {
+            return Err(RejectReason::Framing);
+        }
+        Self::decode_body(body.get(..robust_body_len(N)).ok_or(RejectReason::Framing)?)
     }
 
     /// Reads a robust frame's body after COBS: length → `Framing`, CRC → `Crc`, version →
@@ -289,7 +295,10 @@ impl<const N: usize> CmdMsg<N> {
         if n != robust_body_len(N) {
             return Err(RejectReason::Framing);
         }
-        let (covered, crc) = body.split_at(n.saturating_sub(2));
+        // Split at the constant rather than at `n` (equal here), as in `decode_robust`.
+        let (covered, crc) = body
+            .split_at_checked(robust_body_len(N).saturating_sub(2))
+            .ok_or(RejectReason::Framing)?;
         let stored = <[u8; 2]>::try_from(crc).map_err(|_| RejectReason::Framing)?;
         if crc16::checksum(covered) != u16::from_le_bytes(stored) {
             return Err(RejectReason::Crc);
