@@ -76,6 +76,24 @@ pub fn brake_after_last_frame(trace: &[Line]) -> Option<(u32, u32, u32)> {
     Some((last_frame.tick, brake.tick, brake.age))
 }
 
+/// The corrupted frame was the last thing the host sent: from the line where the refusal count
+/// reached `rejected` on, no valid frame was counted, no other refusal, and no line shows
+/// `applied` (what the corrupted frame would have put on the outputs). Lines before it may still
+/// show the last valid frames arriving: the pty delivers a backlog at the emulator's pace.
+pub fn refused_changed_nothing(
+    trace: &[Line],
+    rejected: u32,
+    applied: impl Fn(&Line) -> bool,
+) -> bool {
+    let Some(i) = trace.iter().position(|l| l.rejected == rejected) else {
+        return false;
+    };
+    let valid = trace[i].valid;
+    trace[i..]
+        .iter()
+        .all(|l| l.valid == valid && l.rejected == rejected && !applied(l))
+}
+
 /// The emulator with the image booted.
 struct Qemu {
     child: Child,
@@ -354,9 +372,10 @@ fn cdc(q: &Qemu, ml: &Path) -> Result<String, String> {
     })?;
     let t = q.trace();
     expect(
-        t.iter()
-            .all(|l| l.valid <= before.valid && !l.out.iter().any(|o| o == "-720")),
-        "the corrupted frame counted as refused, never applied",
+        refused_changed_nothing(&t, before.rejected + 1, |l| {
+            l.out.iter().any(|o| o == "-720")
+        }),
+        "the corrupted frame counted as refused, never applied (no valid frame after it, -900 never on an output)",
     )?;
     // The host stopped: BRAKE within the frames' timeout_ms of 250 (threshold 249 ticks).
     let worst_250 = comm_loss_brake(q, 249)?;
@@ -554,10 +573,8 @@ fn teensy(q: &Qemu, ml: &Path) -> Result<String, String> {
     let worst = comm_loss_brake(q, 249)?;
     let t = q.trace();
     expect(
-        t.iter()
-            .filter(|l| l.tick >= before.tick)
-            .all(|l| l.out == want && l.valid == before.valid),
-        "the corrupted frame changed nothing: the joints stayed at the last valid angles",
+        refused_changed_nothing(&t, before.rejected + 1, |l| l.out != want),
+        "the corrupted frame changed nothing: no valid frame after it, the joints stayed at the last valid angles",
     )?;
     Ok(format!(
         "teensy end to end: PASS (comm-loss BRAKE at most {worst} ms after the last frame, bound 250 ms)"
@@ -587,6 +604,23 @@ tick=259 mode=Brake age=199 drive=BRAKE valid=3 rejected=1 refusals=0 owners=0 o
         assert!(t[4].brake && !t[3].brake);
         // The last frame was counted at tick 60; BRAKE at 259, age 199.
         assert_eq!(brake_after_last_frame(&t), Some((60, 259, 199)));
+        // Refused at tick 60 (rejected 1), nothing valid after it; −720 never on an output.
+        assert!(refused_changed_nothing(&t, 1, |l| l
+            .out
+            .iter()
+            .any(|o| o == "-720")));
+        // A valid frame after the refusal, or the refused value on an output, fails the check.
+        let mut later = t.clone();
+        later[4].valid = 4;
+        assert!(!refused_changed_nothing(&later, 1, |_| false));
+        assert!(!refused_changed_nothing(&t, 1, |l| l
+            .out
+            .iter()
+            .any(|o| o == "+240")));
+        assert!(
+            !refused_changed_nothing(&t, 2, |_| false),
+            "no such refusal"
+        );
     }
 
     #[test]
