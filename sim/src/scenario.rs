@@ -178,6 +178,31 @@ pub enum Fault {
     },
 }
 
+impl Fault {
+    /// The time window the fault acts in, `[start, end)` in s: a corruption's `from_s..to_s`, an
+    /// ESTOP's press to release, `at_s` plus `duration_s` for a pause, a gap, a cut or an
+    /// overcurrent. `None` for the faults that have no window.
+    pub fn window(&self) -> Option<(f64, f64)> {
+        match *self {
+            Self::Corruption { from_s, to_s, .. } => Some((from_s, to_s)),
+            Self::GcPause { at_s, duration_s }
+            | Self::Nav2Gap { at_s, duration_s }
+            | Self::LinkCut { at_s, duration_s }
+            | Self::Overcurrent {
+                at_s, duration_s, ..
+            } => Some((at_s, at_s + duration_s)),
+            Self::Estop { at_s, release_s } => Some((at_s, release_s)),
+            Self::ClockDrift { .. } | Self::McuFreeze { .. } | Self::EncoderGlitch { .. } => None,
+        }
+    }
+
+    /// True if `t` (s) falls in the fault's [`Fault::window`].
+    pub fn active_at(&self, t: f64) -> bool {
+        self.window()
+            .is_some_and(|(start, end)| t >= start && t < end)
+    }
+}
+
 fn forever() -> f64 {
     f64::INFINITY
 }
@@ -688,6 +713,32 @@ impl Scenario {
             .iter()
             .find(|s| t >= s.from_s && t < s.to_s)
             .map(|s| (s.v, s.w))
+    }
+
+    /// True if a fault of the kind `kind` picks is active at `t`.
+    fn any_active(&self, t: f64, kind: impl Fn(&Fault) -> bool) -> bool {
+        self.faults.iter().any(|f| kind(f) && f.active_at(t))
+    }
+
+    /// True if a `gc_pause` holds the host process at `t`.
+    pub fn host_paused(&self, t: f64) -> bool {
+        self.any_active(t, |f| matches!(f, Fault::GcPause { .. }))
+    }
+
+    /// True if a `link_cut` cuts the link at `t`.
+    pub fn link_cut(&self, t: f64) -> bool {
+        self.any_active(t, |f| matches!(f, Fault::LinkCut { .. }))
+    }
+
+    /// True if Nav2 publishes nothing at `t` (`nav2_gap`).
+    pub fn nav2_gap(&self, t: f64) -> bool {
+        self.any_active(t, |f| matches!(f, Fault::Nav2Gap { .. }))
+    }
+
+    /// The simulation steps of `dt` s that cover the run: (index, time s).
+    pub fn steps(&self, dt: f64) -> impl Iterator<Item = (u64, f64)> {
+        let n = (self.duration_s / dt).ceil() as u64;
+        (0..n).map(move |k| (k, k as f64 * dt))
     }
 
     /// The MCU and host clock errors, ppm.
