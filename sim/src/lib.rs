@@ -3,7 +3,7 @@
 //! with fault injection. Three boards: seed 000 (SPI, two DC motors and a differential-drive robot:
 //! [`board`], [`runner`]), seed 001 (USB CDC / UART, four PWM motors on a skid-steer robot:
 //! [`cdc`], [`skid`]) and seed 003 (UART, a four-joint stepper arm: [`teensy`]); the scenario's
-//! `profile` chooses.
+//! `profile` chooses. What every run measures the same way is in [`measure`].
 //!
 //! Host-only code: indexing and arithmetic here are on fixed wheel, motor and joint arrays and
 //! floats of a model, and a panic would be a simulator bug, never a robot fault; the MCU-path
@@ -17,6 +17,7 @@
 pub mod board;
 pub mod cdc;
 pub mod host;
+pub mod measure;
 pub mod plant;
 pub mod report;
 pub mod rng;

@@ -16,6 +16,7 @@ use statemachine::{FaultFlags, Mode};
 
 use crate::board::SimBoard;
 use crate::host::HostModel;
+use crate::measure::{add_report, Trace, Watch};
 use crate::plant::{BridgeDrive, Plant};
 use crate::rng::Rng;
 use crate::scenario::{Fault, Profile, Request, Scenario};
@@ -380,10 +381,6 @@ pub fn corrupt(frame: &mut [u8], rng: &mut Rng) -> bool {
     *frame != before[..]
 }
 
-fn in_window(t: f64, at: f64, dur: f64) -> bool {
-    t >= at && t < at + dur
-}
-
 /// Runs `sc` against `host`; writes the CSV trace to `trace` if given. `host` is the seed 000
 /// host; the serial profiles run their own scripted hosts ([`crate::cdc`], [`crate::teensy`]).
 pub fn run<H: HostModel>(
@@ -403,7 +400,7 @@ fn run_amr<H: HostModel>(
     sc: &Scenario,
     host: &mut H,
     opts: RunOptions,
-    mut trace: Option<&mut dyn Write>,
+    trace: Option<&mut dyn Write>,
 ) -> std::io::Result<RunResult> {
     let wall = Instant::now();
     let (mcu_ppm, host_ppm) = sc.drift_ppm();
@@ -440,46 +437,26 @@ fn run_amr<H: HostModel>(
     let mut inflight: Option<Transfer> = None;
 
     let onset = sc.fault_onset();
-    let mut s = Summary {
-        name: sc.name.clone(),
-        profile: sc.profile.name().into(),
-        onset_s: onset,
-        ..Summary::default()
-    };
+    let mut s = Summary::new(sc);
     let mut series = Series::default();
     let mut last_valid_t: Option<f64> = None;
-    let mut prev_mode = mcu.out.mode;
-    let mut odo_at_onset: Option<f64> = None;
+    let mut watch = Watch::new(mcu.out.mode);
     let mut clock_err_sum = 0.0;
     let mut clock_err_n = 0u64;
     let mut seed_err_sum = 0.0;
     let mut seed_err_n = 0u64;
     let mut last_progress = 0.0;
 
-    if let Some(w) = trace.as_deref_mut() {
-        writeln!(w, "t_s,mode,age,faults,host_cmd_l,host_cmd_r,applied_l,applied_r,wheel_l,wheel_r,est_l,est_r,current_l,current_r,duty_l,duty_r,brake,v_mps,w_radps,x_m,y_m,odometer_m,frames_sent,corrupted_sent,corrupted_applied,rejected,clock_err_us")?;
-    }
+    let mut trace = Trace::new(sc, trace, "host_cmd_l,host_cmd_r,applied_l,applied_r,wheel_l,wheel_r,est_l,est_r,current_l,current_r,duty_l,duty_r,brake,v_mps,w_radps,x_m,y_m,odometer_m,frames_sent,corrupted_sent,corrupted_applied,rejected,clock_err_us")?;
 
-    let steps = (sc.duration_s / dt).ceil() as u64;
     let mut tick_index = 0u64;
-    for n in 0..steps {
-        let t = n as f64 * dt;
-        let paused = sc.faults.iter().any(|f| match *f {
-            Fault::GcPause { at_s, duration_s } => in_window(t, at_s, duration_s),
-            _ => false,
-        });
-        let link_cut = sc.faults.iter().any(|f| match *f {
-            Fault::LinkCut { at_s, duration_s } => in_window(t, at_s, duration_s),
-            _ => false,
-        });
+    for (n, t) in sc.steps(dt) {
+        let paused = sc.host_paused(t);
+        let link_cut = sc.link_cut(t);
 
         // Nav2 publishes at its rate (nothing while the host process is paused or Nav2 stalls).
         while next_nav2 <= t {
-            let gap = sc.faults.iter().any(|f| match *f {
-                Fault::Nav2Gap { at_s, duration_s } => in_window(next_nav2, at_s, duration_s),
-                _ => false,
-            });
-            if !paused && !gap {
+            if !paused && !sc.nav2_gap(next_nav2) {
                 if let Some((v, w)) = sc.cmd_vel_at(next_nav2) {
                     host.cmd_vel(host_clock(t), v, w);
                 }
@@ -509,16 +486,11 @@ fn run_amr<H: HostModel>(
                     let k = wheel.index();
                     mcu.glitch[k] = mcu.glitch[k].wrapping_add(counts);
                 }
-                Fault::Overcurrent {
-                    at_s,
-                    duration_s,
-                    wheel,
-                    amps,
-                } if in_window(t, at_s, duration_s) => {
+                Fault::Overcurrent { wheel, amps, .. } if f.active_at(t) => {
                     overcurrent[wheel.index()] += amps;
                 }
-                Fault::Estop { at_s, release_s } => {
-                    estop |= t >= at_s && t < release_s;
+                Fault::Estop { .. } => {
+                    estop |= f.active_at(t);
                 }
                 _ => {}
             }
@@ -591,10 +563,7 @@ fn run_amr<H: HostModel>(
                     }
                 }
                 for d in host.drain_diagnostics() {
-                    match s.host_reports.iter_mut().find(|(_, n, _)| *n == d) {
-                        Some(e) => e.2 += 1,
-                        None => s.host_reports.push((t, d, 1)),
-                    }
+                    add_report(&mut s.host_reports, t, &d, 1);
                 }
             }
         }
@@ -616,17 +585,11 @@ fn run_amr<H: HostModel>(
                 let mut corrupted = false;
                 let mut corrupt_feedback = false;
                 for f in &sc.faults {
-                    if let Fault::Corruption {
-                        rate,
-                        from_s,
-                        to_s,
-                        feedback,
-                    } = *f
-                    {
-                        if t >= from_s && t < to_s && rng.chance(rate) {
+                    if let Fault::Corruption { rate, feedback, .. } = *f {
+                        if f.active_at(t) && rng.chance(rate) {
                             corrupted |= corrupt(&mut tx, &mut rng);
                         }
-                        if feedback && t >= from_s && t < to_s && rng.chance(rate) {
+                        if feedback && f.active_at(t) && rng.chance(rate) {
                             corrupt_feedback = true;
                         }
                     }
@@ -680,34 +643,12 @@ fn run_amr<H: HostModel>(
 
         // Measurements.
         let out = mcu.out;
-        let since = |x: f64| onset.filter(|&o| x >= o).map(|o| (x - o) * 1e3);
-        if out.mode != prev_mode {
-            let after = since(t);
-            match out.mode {
-                Mode::Hold if s.hold_ms.is_none() => s.hold_ms = after,
-                Mode::Stop if s.stop_ms.is_none() => s.stop_ms = after,
-                Mode::Brake => {
-                    if s.brake_ms.is_none() {
-                        s.brake_ms = after;
-                    }
-                    if s.brake_after_last_frame_ms.is_none()
-                        && out.faults.contains(FaultFlags::COMM_LOST)
-                        && (onset.is_none() || after.is_some())
-                    {
-                        s.brake_after_last_frame_ms = last_valid_t.map(|lv| (t - lv) * 1e3);
-                    }
-                }
-                _ => {}
-            }
-            prev_mode = out.mode;
-        }
-        if let Some(o) = onset {
-            let braked = crate::board::bridge_drive(&mcu.bridge)
+        watch.mode(&mut s, t, out.mode, out.faults, last_valid_t);
+        let braked = onset.is_some()
+            && crate::board::bridge_drive(&mcu.bridge)
                 .iter()
                 .all(|d| matches!(d, BridgeDrive::Short));
-            if t >= o && braked && s.bridge_brake_ms.is_none() {
-                s.bridge_brake_ms = Some((t - o) * 1e3);
-            }
+        if let Some(o) = onset {
             if t >= o
                 && braked
                 && out.faults.contains(FaultFlags::COMM_LOST)
@@ -715,21 +656,8 @@ fn run_amr<H: HostModel>(
             {
                 s.bridge_brake_after_last_frame_ms = last_valid_t.map(|lv| (t - lv) * 1e3);
             }
-            if t >= o && odo_at_onset.is_none() {
-                odo_at_onset = Some(plant.odometer);
-                s.speed_at_onset = Some(plant.v);
-            }
         }
-        if let Some(o0) = odo_at_onset {
-            if s.stop_distance_m.is_none() && plant.v.abs() < 0.002 && plant.w.abs() < 0.01 {
-                s.stop_distance_m = Some(plant.odometer - o0);
-            }
-        }
-        s.peak_speed = s.peak_speed.max(plant.v.abs());
-        s.peak_current = s
-            .peak_current
-            .max(plant.current[0].abs())
-            .max(plant.current[1].abs());
+        watch.motion(&mut s, t, &plant, &plant.current, braked);
 
         if ticked || (frozen && n % 20 == 0) {
             tick_index += 1;
@@ -739,19 +667,18 @@ fn run_amr<H: HostModel>(
                 .drive
                 .speeds()
                 .map_or([0.0; 2], |s| s.map(|v| v.to_num::<f64>()));
-            if opts.keep_series && tick_index % u64::from(sc.trace_every_ms) == 0 {
-                series.t.push(t);
+            let due = trace.due(tick_index);
+            if opts.keep_series && due {
+                series.push_tick(t, out.mode, out.age, []);
                 for k in 0..2 {
                     series.wheel[k].push(ws[k]);
                     series.host_cmd[k].push(f64::from(hc[k]));
                     series.applied[k].push(ap[k]);
                 }
-                series.mode.push(out.mode as u8);
-                series.age.push(out.age);
                 series.v.push(plant.v);
             }
-            if let Some(w) = trace.as_deref_mut() {
-                if tick_index % u64::from(sc.trace_every_ms) == 0 {
+            if due {
+                if let Some(w) = trace.row(t, out.mode, out.age, out.faults)? {
                     let est = mcu.speed_estimate();
                     let brake = matches!(
                         crate::board::bridge_drive(&mcu.bridge)[0],
@@ -760,11 +687,7 @@ fn run_amr<H: HostModel>(
                     let duty = mcu.duty();
                     writeln!(
                         w,
-                        "{:.4},{},{},{:#06x},{:.4},{:.4},{:.4},{:.4},{:.4},{:.4},{:.3},{:.3},{:.3},{:.3},{:.4},{:.4},{},{:.4},{:.4},{:.4},{:.4},{:.4},{},{},{},{},{}",
-                        t,
-                        mode_name(out.mode),
-                        out.age,
-                        out.faults.0,
+                        "{:.4},{:.4},{:.4},{:.4},{:.4},{:.4},{:.3},{:.3},{:.3},{:.3},{:.4},{:.4},{},{:.4},{:.4},{:.4},{:.4},{:.4},{},{},{},{},{}",
                         hc[0],
                         hc[1],
                         ap[0],
@@ -806,18 +729,13 @@ fn run_amr<H: HostModel>(
         }
     }
 
-    s.sim_s = sc.duration_s;
-    s.wall_s = wall.elapsed().as_secs_f64();
-    s.final_mode = mode_name(mcu.out.mode).to_string();
     s.final_v = plant.v;
-    s.rejected_total = u64::from(mcu.safety().ladder().counters().rejected_total());
-    s.brake_entries = u64::from(mcu.safety().ladder().counters().brake_entries);
-    s.rearms = u64::from(mcu.safety().ladder().counters().rearms);
     if clock_err_n > 0 {
         s.clock_err_final_us = Some(clock_err_sum / clock_err_n as f64);
     }
     if seed_err_n > 0 {
         s.seed_clock_err_final_us = Some(seed_err_sum / seed_err_n as f64);
     }
+    s.finish(sc, wall, mcu.safety().ladder().counters(), mcu.out.mode);
     Ok(RunResult { summary: s, series })
 }
