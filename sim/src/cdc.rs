@@ -31,13 +31,14 @@ use mcu::cdc::{
 use mcu::serial::SerialTickInputs;
 use mcu::Safety;
 use protocol::cdc::{self, Message, MsgId, SetMotorPwm, StatusFlags, StreamDecoder};
-use statemachine::{Config, Estop, FaultFlags, Mode, Output};
+use statemachine::{Config, Estop, Output};
 
+use crate::measure::{add_report, Trace, Watch};
 use crate::rng::Rng;
-use crate::runner::{corrupt, mode_name, Panel, RunOptions, RunResult, Series, Summary};
-use crate::scenario::{CdcMessage, Fault, Scenario};
+use crate::runner::{Panel, RunOptions, RunResult, Series, Summary};
+use crate::scenario::{CdcMessage, Scenario};
+use crate::serial::{Decode, HostRx, Link, Rearm, Schedule, SerialBoard};
 use crate::skid::{MotorDrive, Skid, G, SMALL_4WD};
-use crate::wire::Wire;
 
 /// Simulation step: 100 µs.
 pub const STEP_S: f64 = 100e-6;
@@ -52,15 +53,6 @@ const VBAT_MV: u16 = 12_000;
 /// seed 000 board's timers.
 pub fn pwm_arr() -> u16 {
     mcu::tuning::AMR.pwm_arr().unwrap_or(1)
-}
-
-/// What one received byte did.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
-pub struct ByteReport {
-    /// The byte completed a frame that decoded.
-    pub decoded: bool,
-    /// The ladder accepted a command frame (`SET_MOTOR_PWM`, `MOTOR_ENABLE 0`).
-    pub valid: bool,
 }
 
 /// The seed 001 board: task state as the firmware would hold it, and its outputs.
@@ -99,11 +91,6 @@ impl SimCdcBoard {
         }
     }
 
-    /// The safety core.
-    pub fn safety(&self) -> &Safety<MOTORS> {
-        &self.safety
-    }
-
     /// The link task (decoder counters, transmit queue).
     pub fn link(&self) -> &CdcLinkTask {
         &self.link
@@ -127,23 +114,6 @@ impl SimCdcBoard {
         }
     }
 
-    /// `link_rx`: one received byte.
-    pub fn on_byte(&mut self, byte: u8) -> ByteReport {
-        let frames = self.link.stats().frames;
-        let valid = self.safety.ladder().counters().valid_frames;
-        let st = self.board_status();
-        if let Some(out) = self.link.on_byte(&mut self.safety, byte, &st) {
-            self.out = out;
-            if let Some(m) = outputs_after_frame(&out, self.arr) {
-                self.motors = m;
-            }
-        }
-        ByteReport {
-            decoded: self.link.stats().frames != frames,
-            valid: self.safety.ladder().counters().valid_frames != valid,
-        }
-    }
-
     /// `watchdog_tick`, and `imu_read` every tenth tick with the MPU6050's registers from `imu`
     /// (accelerometer, temperature, gyroscope). Returns the IMU frame's `t_ms` if one was queued.
     pub fn tick(&mut self, imu: impl FnOnce() -> ([i16; 3], i16, [i16; 3])) -> Option<u32> {
@@ -162,24 +132,39 @@ impl SimCdcBoard {
         self.link.send_imu(&frame);
         Some(st.t_ms)
     }
+}
 
-    /// `link_tx`: the next byte for the transmitter.
-    pub fn tx_pop(&mut self) -> Option<u8> {
+impl SerialBoard<MOTORS> for SimCdcBoard {
+    fn safety(&self) -> &Safety<MOTORS> {
+        &self.safety
+    }
+
+    fn on_byte(&mut self, byte: u8) {
+        let st = self.board_status();
+        if let Some(out) = self.link.on_byte(&mut self.safety, byte, &st) {
+            self.out = out;
+            if let Some(m) = outputs_after_frame(&out, self.arr) {
+                self.motors = m;
+            }
+        }
+    }
+
+    fn tx_pop(&mut self) -> Option<u8> {
         self.link.tx.pop()
+    }
+
+    fn frames(&self) -> u32 {
+        self.link.stats().frames
     }
 }
 
-/// A frame the host wrote.
-struct Sent {
-    msg: Message,
-    /// Bytes changed on the way (corruption fault or a bit error on the line).
-    corrupted: bool,
-    /// A byte of it fell into a link cut.
-    lost: bool,
-    /// The board decoded it.
-    decoded: bool,
-    /// Index into the scenario's commands, for low-rate messages.
-    command: Option<usize>,
+impl Decode for StreamDecoder {
+    type Msg = Message;
+    type Error = cdc::Error;
+
+    fn decode(&mut self, byte: u8) -> Option<Result<Message, cdc::Error>> {
+        self.push(byte)
+    }
 }
 
 /// What the host received in reply to one low-rate message.
@@ -191,12 +176,10 @@ struct Reply {
 
 /// The scripted seed 001 host's receiving side.
 struct Host {
-    dec: StreamDecoder,
+    rx: HostRx<StreamDecoder>,
     /// Low-rate messages waiting for their ACK: (command index, MSG_ID).
     pending: VecDeque<(usize, MsgId)>,
     replies: Vec<Reply>,
-    decoded: u64,
-    broken: u64,
     reports: Vec<(f64, String, u64)>,
     failures: Vec<String>,
     imus: VecDeque<(u32, [f64; 3], [f64; 3])>,
@@ -205,26 +188,15 @@ struct Host {
 
 impl Host {
     fn report(&mut self, t: f64, name: &str) {
-        match self.reports.iter_mut().find(|(_, n, _)| n == name) {
-            Some(e) => e.2 += 1,
-            None => self.reports.push((t, name.into(), 1)),
-        }
+        add_report(&mut self.reports, t, name, 1);
     }
 
     fn receive(&mut self, t: f64, byte: u8) {
-        let Some(r) = self.dec.push(byte) else {
-            return;
+        let m = match self.rx.byte(t, byte, "a reply") {
+            Ok(Some(m)) => m,
+            Ok(None) => return,
+            Err(failure) => return self.failures.push(failure),
         };
-        let m = match r {
-            Ok(m) => m,
-            Err(e) => {
-                self.broken += 1;
-                self.failures
-                    .push(format!("{t:.4} s: host could not decode a reply: {e:?}"));
-                return;
-            }
-        };
-        self.decoded += 1;
         match m {
             Message::Ack(a) => {
                 self.report(
@@ -316,15 +288,11 @@ fn message(c: CdcMessage) -> Message {
     }
 }
 
-fn in_window(t: f64, at: f64, dur: f64) -> bool {
-    t >= at && t < at + dur
-}
-
 /// Runs a `cdc` scenario; writes the CSV trace to `trace` if given.
 pub fn run(
     sc: &Scenario,
     opts: RunOptions,
-    mut trace: Option<&mut dyn Write>,
+    trace: Option<&mut dyn Write>,
 ) -> std::io::Result<RunResult> {
     let wall = Instant::now();
     let cfg = &sc.cdc;
@@ -332,46 +300,24 @@ pub fn run(
     let mut board = SimCdcBoard::new();
     let arr = board.arr();
     let mut plant = Skid::new(SMALL_4WD);
-    let mut down = Wire::new(
-        sc.serial.baud,
-        sc.serial.latency_ms,
-        sc.serial.bit_error_rate,
-    );
-    let mut up = Wire::new(sc.serial.baud, sc.serial.latency_ms, 0.0);
-    let mut monitor = StreamDecoder::new();
-    let mut sent: Vec<Sent> = Vec::new();
-    let mut commands = cfg.commands.clone();
-    commands.sort_by(|a, b| a.at_s.total_cmp(&b.at_s));
+    // Each frame's expected reply: the index of its low-rate message in `commands`.
+    let mut link: Link<Message, Option<usize>, _> = Link::new(sc, StreamDecoder::new());
+    let mut schedule = Schedule::new(cfg.frame_hz, &cfg.commands, |c| c.at_s);
     let mut host = Host {
-        dec: StreamDecoder::new(),
+        rx: HostRx::default(),
         pending: VecDeque::new(),
-        replies: vec![Reply::default(); commands.len()],
-        decoded: 0,
-        broken: 0,
+        replies: vec![Reply::default(); schedule.commands.len()],
         reports: Vec::new(),
         failures: Vec::new(),
         imus: VecDeque::new(),
         imu_err: None,
     };
-    let period = 1.0 / cfg.frame_hz;
-    let mut next_frame = 0.0;
-    let mut next_command = 0usize;
-    let onset = sc.fault_onset();
     let brake_age = statemachine::config::brake_age_for_timeout_ms(cfg.timeout_ms)
         .unwrap_or(u16::MAX)
         .min(Config::CDC.params().brake_after);
     let p = Config::CDC.params();
 
-    let mut s = Summary {
-        name: sc.name.clone(),
-        profile: sc.profile.name().into(),
-        onset_s: onset,
-        ..Summary::default()
-    };
-    let mut series = Series {
-        thresholds: Some([p.hold_after, p.stop_after, brake_age]),
-        ..Series::default()
-    };
+    let mut s = Summary::new(sc);
     let names = [
         "host pwm m1 (left)",
         "host pwm m2 (right)",
@@ -379,130 +325,76 @@ pub fn run(
         "duty m2 (applied)",
         "robot speed (m/s)",
     ];
-    let mut lines: Vec<(String, Vec<f64>)> = names
-        .iter()
-        .map(|n| ((*n).to_string(), Vec::new()))
-        .collect();
-    let mut last_valid: Option<(f64, u32)> = None;
-    let mut prev_mode = board.out.mode;
-    let mut brake_entries = board.safety().ladder().counters().brake_entries;
-    let mut rearm_delivered = false;
+    let caption = "duty (fraction of full scale) and robot speed";
+    let mut series = Series {
+        lines: opts
+            .keep_series
+            .then(|| Panel::new(caption, names.map(String::from))),
+        thresholds: Some([p.hold_after, p.stop_after, brake_age]),
+        ..Series::default()
+    };
+    let mut watch = Watch::new(board.out.mode);
+    let mut rearm = Rearm::new(board.safety().ladder().counters());
     let mut disabled = Disabled::No;
     let mut host_estop = false;
     let mut estop_at: Option<f64> = None;
-    let mut odo_at_onset: Option<f64> = None;
     let mut onset_braked_ticks: Option<u32> = None;
 
-    if let Some(w) = trace.as_deref_mut() {
-        writeln!(w, "t_s,mode,age,faults,pwm_cmd_1,pwm_cmd_2,pwm_cmd_3,pwm_cmd_4,duty_1,duty_2,duty_3,duty_4,shorted,current_1,current_2,current_3,current_4,wheel_l,wheel_r,v_mps,w_radps,x_m,y_m,odometer_m,frames_sent,corrupted_sent,corrupted_applied,rejected,replies,reply_errors")?;
-    }
+    let mut trace = Trace::new(sc, trace, "pwm_cmd_1,pwm_cmd_2,pwm_cmd_3,pwm_cmd_4,duty_1,duty_2,duty_3,duty_4,shorted,current_1,current_2,current_3,current_4,wheel_l,wheel_r,v_mps,w_radps,x_m,y_m,odometer_m,frames_sent,corrupted_sent,corrupted_applied,rejected,replies,reply_errors")?;
 
-    let steps = (sc.duration_s / STEP_S).ceil() as u64;
-    for n in 0..steps {
-        let t = n as f64 * STEP_S;
-        let paused = sc.faults.iter().any(|f| match *f {
-            Fault::GcPause { at_s, duration_s } => in_window(t, at_s, duration_s),
-            _ => false,
-        });
-        let cut = |x: f64| {
-            sc.faults.iter().any(|f| match *f {
-                Fault::LinkCut { at_s, duration_s } => in_window(x, at_s, duration_s),
-                _ => false,
-            })
-        };
+    for (n, t) in sc.steps(STEP_S) {
+        let paused = sc.host_paused(t);
 
         // The host writes: the 50 Hz stream, then any low-rate message due.
         let mut outgoing: Vec<(Message, Option<usize>)> = Vec::new();
-        while next_frame <= t {
-            if !paused {
-                let pwm = cfg.pwm_at(next_frame);
-                outgoing.push((
-                    Message::SetMotorPwm(SetMotorPwm {
-                        pwm,
-                        timeout_ms: cfg.timeout_ms,
-                    }),
-                    None,
-                ));
-            }
-            next_frame += period;
-        }
-        while !paused && next_command < commands.len() && commands[next_command].at_s <= t {
-            outgoing.push((message(commands[next_command].message), Some(next_command)));
-            next_command += 1;
-        }
+        schedule.frames_due(t, paused, |at| {
+            let pwm = cfg.pwm_at(at);
+            outgoing.push((
+                Message::SetMotorPwm(SetMotorPwm {
+                    pwm,
+                    timeout_ms: cfg.timeout_ms,
+                }),
+                None,
+            ));
+        });
+        schedule.commands_due(t, paused, |k, c| {
+            outgoing.push((message(c.message), Some(k)));
+        });
         for (msg, command) in outgoing {
             let mut buf = [0u8; cdc::MAX_FRAME_LEN];
             let len = msg.encode(&mut buf);
-            let bytes = &mut buf[..len];
-            let mut corrupted = false;
-            for f in &sc.faults {
-                if let Fault::Corruption {
-                    rate, from_s, to_s, ..
-                } = *f
-                {
-                    if t >= from_s && t < to_s && rng.chance(rate) {
-                        corrupted |= corrupt(bytes, &mut rng);
-                    }
-                }
-            }
-            let tag = sent.len();
-            corrupted |= down.write(t, bytes, tag, &mut rng) > 0;
             if let Some(k) = command {
                 host.replies[k].sent = true;
                 if matches!(msg, Message::MotorEnable(_) | Message::Estop(_)) {
                     host.pending.push_back((k, msg.id()));
                 }
             }
-            sent.push(Sent {
-                msg,
-                corrupted,
-                lost: false,
-                decoded: false,
-                command,
-            });
+            link.write(sc, t, msg, &mut buf[..len], command, &mut rng);
         }
 
         // link_rx: every byte that arrived.
-        while let Some(b) = down.arrived(t) {
-            if cut(b.at) {
-                sent[b.tag].lost = true;
-                continue;
-            }
-            let rep = board.on_byte(b.byte);
-            let seen = monitor.push(b.byte);
-            if let Some(Ok(m)) = seen {
-                debug_assert!(rep.decoded);
-                if m != sent[b.tag].msg {
-                    // A message the host never sent got through the decoder.
-                    s.corrupted_applied += 1;
-                } else {
-                    sent[b.tag].decoded = true;
-                }
+        while let Some((_, m)) = link.link_rx(sc, t, &mut board, &mut s) {
+            if let Some(m) = m {
                 match m {
                     // Only an enable after the host's own ESTOP was released re-arms (the link
                     // is the only ESTOP source here).
                     Message::MotorEnable(true) => {
-                        rearm_delivered |= !host_estop;
+                        if !host_estop {
+                            rearm.deliver();
+                        }
                         disabled = Disabled::No;
                     }
                     Message::MotorEnable(false) => disabled = Disabled::FromNextTick,
                     Message::Estop(Estop::Engage) => {
                         estop_at = Some(t);
                         host_estop = true;
-                        rearm_delivered = false;
+                        rearm.cancel();
                     }
                     Message::Estop(Estop::Release) => host_estop = false,
                     _ => {}
                 }
             }
-            if rep.valid {
-                last_valid = Some((t, board.safety().ticks()));
-            }
-            let e = board.safety().ladder().counters().brake_entries;
-            if e != brake_entries {
-                brake_entries = e;
-                rearm_delivered = false;
-            }
+            rearm.latches(board.safety().ladder().counters());
         }
 
         // watchdog_tick (and imu_read).
@@ -515,33 +407,14 @@ pub fn run(
                 disabled = Disabled::Yes;
                 s.duty_while_disabled.get_or_insert(0.0);
             }
-            let e = board.safety().ladder().counters().brake_entries;
-            if e != brake_entries {
-                brake_entries = e;
-                rearm_delivered = false;
-            }
-            if prev_mode == Mode::Brake && board.out.mode != Mode::Brake {
-                if !rearm_delivered {
-                    s.rearm_violations += 1;
-                }
-                rearm_delivered = false;
-            }
+            let c = board.safety().ladder().counters();
+            rearm.tick(c, watch.mode, board.out.mode, &mut s);
         }
 
         // link_tx: the transmitter sends whatever is queued while the line is free.
-        while up.idle_before(t + STEP_S) {
-            match board.tx_pop() {
-                Some(b) => {
-                    up.write(t, &[b], 0, &mut rng);
-                }
-                None => break,
-            }
-        }
-        while let Some(b) = up.arrived(t) {
-            if !cut(b.at) {
-                host.receive(t, b.byte);
-            }
-        }
+        link.link_tx(sc, t, STEP_S, &mut board, &mut rng, |b, _| {
+            host.receive(t, b)
+        });
 
         // The plant.
         let drive = board.motors.map(|m| MotorDrive::of(&m, arr));
@@ -566,128 +439,66 @@ pub fn run(
                 estop_at = None;
             }
         }
-        let since = |x: f64| onset.filter(|&o| x >= o).map(|o| (x - o) * 1e3);
-        if out.mode != prev_mode {
-            let after = since(t);
-            match out.mode {
-                Mode::Hold if s.hold_ms.is_none() => s.hold_ms = after,
-                Mode::Stop if s.stop_ms.is_none() => s.stop_ms = after,
-                Mode::Brake => {
-                    if s.brake_ms.is_none() {
-                        s.brake_ms = after;
-                    }
-                    if s.brake_after_last_frame_ms.is_none()
-                        && out.faults.contains(FaultFlags::COMM_LOST)
-                        && (onset.is_none() || after.is_some())
-                    {
-                        if let Some((lt, lticks)) = last_valid {
-                            s.brake_after_last_frame_ms = Some((t - lt) * 1e3);
-                            s.brake_after_last_frame_ticks =
-                                Some(board.safety().ticks().wrapping_sub(lticks));
-                            onset_braked_ticks = Some(board.safety().ticks());
-                        }
-                    }
-                }
-                _ => {}
-            }
-            prev_mode = out.mode;
+        if link.watch_mode(&mut watch, &mut s, t, &out, board.safety().ticks()) {
+            onset_braked_ticks = Some(board.safety().ticks());
         }
         if s.bridge_brake_after_last_frame_ms.is_none()
             && onset_braked_ticks.is_some()
             && board.all_shorted()
         {
-            if let Some((lt, _)) = last_valid {
+            if let Some((lt, _)) = link.last_valid {
                 s.bridge_brake_after_last_frame_ms = Some((t - lt) * 1e3);
             }
         }
-        if let Some(o) = onset {
-            if t >= o && odo_at_onset.is_none() {
-                odo_at_onset = Some(plant.body.odometer);
-                s.speed_at_onset = Some(plant.body.v);
-            }
-            if t >= o && board.all_shorted() && s.bridge_brake_ms.is_none() {
-                s.bridge_brake_ms = Some((t - o) * 1e3);
-            }
-        }
-        if let Some(o0) = odo_at_onset {
-            if s.stop_distance_m.is_none()
-                && plant.body.v.abs() < 0.002
-                && plant.body.w.abs() < 0.01
-            {
-                s.stop_distance_m = Some(plant.body.odometer - o0);
-            }
-        }
-        s.peak_speed = s.peak_speed.max(plant.body.v.abs());
-        s.peak_current = plant
-            .current
-            .iter()
-            .fold(s.peak_current, |m, i| m.max(i.abs()));
+        watch.motion(&mut s, t, &plant.body, &plant.current, board.all_shorted());
 
-        if n % STEPS_PER_TICK == 0 && n > 0 {
-            let tick_index = n / STEPS_PER_TICK;
-            if tick_index % u64::from(sc.trace_every_ms) == 0 {
-                let cmd = cfg.pwm_at(t).map(|p| f64::from(p) / 1000.0);
-                let duty = board.motors.map(|m| f64::from(m.duty(arr)));
-                if opts.keep_series {
-                    series.t.push(t);
-                    series.mode.push(out.mode as u8);
-                    series.age.push(out.age);
-                    series.v.push(plant.body.v);
-                    for (k, x) in [cmd[0], cmd[1], duty[0], duty[1], plant.body.v]
-                        .into_iter()
-                        .enumerate()
-                    {
-                        lines[k].1.push(x);
-                    }
-                }
-                if let Some(w) = trace.as_deref_mut() {
-                    let ws = plant.body.wheel_speeds();
-                    let b = &plant.body;
-                    writeln!(
-                        w,
-                        "{:.4},{},{},{:#06x},{:.3},{:.3},{:.3},{:.3},{:.4},{:.4},{:.4},{:.4},{},{:.3},{:.3},{:.3},{:.3},{:.4},{:.4},{:.4},{:.4},{:.4},{:.4},{:.4},{},{},{},{},{},{}",
-                        t,
-                        mode_name(out.mode),
-                        out.age,
-                        out.faults.0,
-                        cmd[0],
-                        cmd[1],
-                        cmd[2],
-                        cmd[3],
-                        duty[0],
-                        duty[1],
-                        duty[2],
-                        duty[3],
-                        board.motors.iter().filter(|m| m.in1 && m.in2).count(),
-                        plant.current[0],
-                        plant.current[1],
-                        plant.current[2],
-                        plant.current[3],
-                        ws[0],
-                        ws[1],
-                        b.v,
-                        b.w,
-                        b.x,
-                        b.y,
-                        b.odometer,
-                        sent.len(),
-                        sent.iter().filter(|f| f.corrupted).count(),
-                        s.corrupted_applied,
-                        board.safety().ladder().counters().rejected_total(),
-                        host.decoded,
-                        host.broken,
-                    )?;
-                }
+        if n % STEPS_PER_TICK == 0 && n > 0 && trace.due(n / STEPS_PER_TICK) {
+            let cmd = cfg.pwm_at(t).map(|p| f64::from(p) / 1000.0);
+            let duty = board.motors.map(|m| f64::from(m.duty(arr)));
+            if opts.keep_series {
+                let v = plant.body.v;
+                series.push_tick(t, out.mode, out.age, [cmd[0], cmd[1], duty[0], duty[1], v]);
+                series.v.push(v);
+            }
+            if let Some(w) = trace.row(t, out.mode, out.age, out.faults)? {
+                let ws = plant.body.wheel_speeds();
+                let b = &plant.body;
+                write!(
+                    w,
+                    "{:.3},{:.3},{:.3},{:.3},{:.4},{:.4},{:.4},{:.4},{},{:.3},{:.3},{:.3},{:.3},{:.4},{:.4},{:.4},{:.4},{:.4},{:.4},{:.4},",
+                    cmd[0],
+                    cmd[1],
+                    cmd[2],
+                    cmd[3],
+                    duty[0],
+                    duty[1],
+                    duty[2],
+                    duty[3],
+                    board.motors.iter().filter(|m| m.in1 && m.in2).count(),
+                    plant.current[0],
+                    plant.current[1],
+                    plant.current[2],
+                    plant.current[3],
+                    ws[0],
+                    ws[1],
+                    b.v,
+                    b.w,
+                    b.x,
+                    b.y,
+                    b.odometer,
+                )?;
+                link.trace_tail(w, &s, &board, host.rx.counts())?;
             }
         }
     }
 
     // Replies: every low-rate message that reached the board whole must have its ACK as expected.
-    for (k, c) in commands.iter().enumerate() {
+    for (k, c) in schedule.commands.iter().enumerate() {
         let r = host.replies[k];
-        let delivered = sent
+        let delivered = link
+            .sent
             .iter()
-            .any(|f| f.command == Some(k) && f.decoded && !f.lost);
+            .any(|f| f.expect == Some(k) && f.decoded && !f.lost);
         match (c.ack, r.ack) {
             (Some(want), Some(got)) if want != got => host.failures.push(format!(
                 "{:?} at {} s: ACK result {got}, expected {want}",
@@ -707,37 +518,17 @@ pub fn run(
         }
     }
 
-    let c = board.safety().ladder().counters();
-    s.frames_sent = sent.len() as u64;
-    s.corrupted_sent = sent.iter().filter(|f| f.corrupted).count() as u64;
-    s.corrupted_rejected = sent
-        .iter()
-        .filter(|f| f.corrupted && !f.decoded && !f.lost)
-        .count() as u64;
-    s.rejected_total = u64::from(c.rejected_total());
-    s.brake_entries = u64::from(c.brake_entries);
-    s.rearms = u64::from(c.rearms);
-    s.final_mode = mode_name(board.out.mode).to_string();
+    link.tally(&mut s);
     s.final_v = plant.body.v;
-    s.replies = Some([host.decoded, host.broken]);
+    s.replies = Some(host.rx.counts());
     s.reply_failures = host.failures;
     s.tx_dropped = u64::from(board.link().tx.dropped());
     s.imu_saturated = board.imu_saturated;
     s.imu_max_err = host.imu_err;
     for (t0, name, count) in host.reports {
-        match s.host_reports.iter_mut().find(|(_, n, _)| *n == name) {
-            Some(e) => e.2 += count,
-            None => s.host_reports.push((t0, name, count)),
-        }
+        add_report(&mut s.host_reports, t0, &name, count);
     }
     s.host_reports.sort_by(|a, b| a.0.total_cmp(&b.0));
-    s.sim_s = sc.duration_s;
-    s.wall_s = wall.elapsed().as_secs_f64();
-    if opts.keep_series {
-        series.lines = Some(Panel {
-            caption: "duty (fraction of full scale) and robot speed".into(),
-            signals: lines,
-        });
-    }
+    s.finish(sc, wall, board.safety().ladder().counters(), board.out.mode);
     Ok(RunResult { summary: s, series })
 }

@@ -3,7 +3,8 @@
 //! with fault injection. Three boards: seed 000 (SPI, two DC motors and a differential-drive robot:
 //! [`board`], [`runner`]), seed 001 (USB CDC / UART, four PWM motors on a skid-steer robot:
 //! [`cdc`], [`skid`]) and seed 003 (UART, a four-joint stepper arm: [`teensy`]); the scenario's
-//! `profile` chooses. What every run measures the same way is in [`measure`].
+//! `profile` chooses. What every run measures the same way is in [`measure`]; what the two serial
+//! boards' runs share (the line, the host's frames, the re-arm rule) in [`serial`].
 //!
 //! Host-only code: indexing and arithmetic here are on fixed wheel, motor and joint arrays and
 //! floats of a model, and a panic would be a simulator bug, never a robot fault; the MCU-path
@@ -23,6 +24,7 @@ pub mod report;
 pub mod rng;
 pub mod runner;
 pub mod scenario;
+pub mod serial;
 pub mod skid;
 pub mod teensy;
 pub mod wire;

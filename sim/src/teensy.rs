@@ -29,12 +29,13 @@ use mcu::teensy::{
 };
 use mcu::Safety;
 use protocol::teensy::{CmdMsg, CmdType, RobustDecoder};
-use statemachine::{Config, FaultFlags, Mode, Output, Position};
+use statemachine::{Config, Output, Position, RejectReason};
 
+use crate::measure::{Trace, Watch};
 use crate::rng::Rng;
-use crate::runner::{corrupt, mode_name, Panel, RunOptions, RunResult, Series, Summary};
-use crate::scenario::{Fault, Scenario, TeensyCmd};
-use crate::wire::Wire;
+use crate::runner::{Panel, RunOptions, RunResult, Series, Summary};
+use crate::scenario::{Scenario, TeensyCmd};
+use crate::serial::{Decode, HostRx, Link, Rearm, Schedule, Sent, SerialBoard};
 
 /// Simulation step: one `step_gen` run at 10 kHz.
 pub const STEP_S: f64 = 1.0 / mcu::teensy::STEP_HZ as f64;
@@ -42,15 +43,6 @@ pub const STEP_S: f64 = 1.0 / mcu::teensy::STEP_HZ as f64;
 const STEPS_PER_TICK: u64 = (mcu::teensy::STEP_HZ / 1000) as u64;
 
 type Msg = CmdMsg<JOINTS>;
-
-/// What one received byte did.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
-pub struct ByteReport {
-    /// The byte completed a frame that decoded.
-    pub decoded: bool,
-    /// The ladder accepted an `MTRS` frame.
-    pub valid: bool,
-}
 
 /// The seed 003 board: task state as the firmware would hold it, and the motors.
 #[derive(Clone, Debug)]
@@ -89,11 +81,6 @@ impl SimTeensyBoard {
         }
     }
 
-    /// The safety core.
-    pub fn safety(&self) -> &Safety<JOINTS> {
-        &self.safety
-    }
-
     /// The link task (decoder counters, transmit queue).
     pub fn link(&self) -> &TeensyLinkTask {
         &self.link
@@ -109,24 +96,6 @@ impl SimTeensyBoard {
         self.stepgen.position()
     }
 
-    /// `link_rx`: one received byte.
-    pub fn on_byte(&mut self, byte: u8) -> ByteReport {
-        let frames = self.link.stats().frames;
-        let valid = self.safety.ladder().counters().valid_frames;
-        if let Some((out, action)) = self.link.on_byte(&mut self.safety, byte) {
-            self.out = out;
-            match action {
-                BoardAction::None => {}
-                BoardAction::EndEffector(on) => self.end_effector = on,
-                BoardAction::Accel(a) => self.joints.set_accel(a),
-            }
-        }
-        ByteReport {
-            decoded: self.link.stats().frames != frames,
-            valid: self.safety.ladder().counters().valid_frames != valid,
-        }
-    }
-
     /// `watchdog_tick`: the ladder's tick, the joints' profiles, the new step targets.
     pub fn tick(&mut self) {
         self.out = mcu::serial::tick(&mut self.safety, &SerialTickInputs::default());
@@ -137,32 +106,47 @@ impl SimTeensyBoard {
     pub fn step_gen(&mut self) -> [StepPulse; JOINTS] {
         self.stepgen.run()
     }
+}
 
-    /// `link_tx`: the next byte for the transmitter.
-    pub fn tx_pop(&mut self) -> Option<u8> {
+impl SerialBoard<JOINTS> for SimTeensyBoard {
+    fn safety(&self) -> &Safety<JOINTS> {
+        &self.safety
+    }
+
+    fn on_byte(&mut self, byte: u8) {
+        if let Some((out, action)) = self.link.on_byte(&mut self.safety, byte) {
+            self.out = out;
+            match action {
+                BoardAction::None => {}
+                BoardAction::EndEffector(on) => self.end_effector = on,
+                BoardAction::Accel(a) => self.joints.set_accel(a),
+            }
+        }
+    }
+
+    fn tx_pop(&mut self) -> Option<u8> {
         self.link.tx.pop()
+    }
+
+    fn frames(&self) -> u32 {
+        self.link.stats().frames
     }
 }
 
-/// A frame the host wrote.
-struct Sent {
-    msg: Msg,
-    /// When the host wrote it, s.
-    t: f64,
-    /// The `cmd_success` its echo must carry.
-    want: bool,
-    corrupted: bool,
-    lost: bool,
-    decoded: bool,
+impl Decode for RobustDecoder<JOINTS> {
+    type Msg = Msg;
+    type Error = RejectReason;
+
+    fn decode(&mut self, byte: u8) -> Option<Result<Msg, RejectReason>> {
+        self.push(byte)
+    }
 }
 
 /// The scripted seed 003 host's receiving side.
 struct Host {
-    dec: RobustDecoder<JOINTS>,
+    rx: HostRx<RobustDecoder<JOINTS>>,
     /// Frames waiting for their echo, by index into the sent frames.
     pending: VecDeque<usize>,
-    decoded: u64,
-    broken: u64,
     echoed_ok: u64,
     first_echo: Option<f64>,
     failures: Vec<String>,
@@ -177,19 +161,12 @@ impl Host {
         }
     }
 
-    fn receive(&mut self, t: f64, byte: u8, sent: &[Sent]) {
-        let Some(r) = self.dec.push(byte) else {
-            return;
+    fn receive(&mut self, t: f64, byte: u8, sent: &[Sent<Msg, bool>]) {
+        let echo = match self.rx.byte(t, byte, "an echo") {
+            Ok(Some(m)) => m,
+            Ok(None) => return,
+            Err(failure) => return self.fail(failure),
         };
-        let echo = match r {
-            Ok(m) => m,
-            Err(e) => {
-                self.broken += 1;
-                self.fail(format!("{t:.4} s: host could not decode an echo: {e:?}"));
-                return;
-            }
-        };
-        self.decoded += 1;
         self.first_echo.get_or_insert(t);
         // The stream repeats identical frames: the echo is the first the board took whole.
         let same = |k: &usize| sent[*k].decoded && sent[*k].msg == echo.reply(false);
@@ -213,13 +190,13 @@ impl Host {
             }
         }
         let f = &sent[k];
-        if (echo.cmd_success != 0) != f.want {
+        if (echo.cmd_success != 0) != f.expect {
             self.fail(format!(
                 "{t:.4} s: {:?} {:?} echoed with cmd_success {}, expected {}",
                 f.msg.cmd_type,
                 f.msg.mtr_angles,
                 echo.cmd_success,
-                u8::from(f.want)
+                u8::from(f.expect)
             ));
         } else {
             self.echoed_ok += 1;
@@ -236,15 +213,11 @@ fn mtrs(deg: [i32; JOINTS], speed_deg_s: i32) -> Msg {
     }
 }
 
-fn in_window(t: f64, at: f64, dur: f64) -> bool {
-    t >= at && t < at + dur
-}
-
 /// Runs a `teensy` scenario; writes the CSV trace to `trace` if given.
 pub fn run(
     sc: &Scenario,
     opts: RunOptions,
-    mut trace: Option<&mut dyn Write>,
+    trace: Option<&mut dyn Write>,
 ) -> std::io::Result<RunResult> {
     let wall = Instant::now();
     let cfg = &sc.teensy;
@@ -252,53 +225,37 @@ pub fn run(
     let steps_per_rad: f64 = STEPS_PER_RAD.to_num();
     let mut rng = Rng::new(sc.seed);
     let mut board = SimTeensyBoard::new();
-    let mut down = Wire::new(
-        sc.serial.baud,
-        sc.serial.latency_ms,
-        sc.serial.bit_error_rate,
-    );
-    let mut up = Wire::new(sc.serial.baud, sc.serial.latency_ms, 0.0);
-    let mut monitor = RobustDecoder::<JOINTS>::new();
-    let mut sent: Vec<Sent> = Vec::new();
-    let mut commands = cfg.commands.clone();
-    commands.sort_by(|a, b| a.at_s.total_cmp(&b.at_s));
+    // Each frame's expected reply: the `cmd_success` its echo must carry.
+    let mut link: Link<Msg, bool, _> = Link::new(sc, RobustDecoder::<JOINTS>::new());
+    let mut schedule = Schedule::new(cfg.frame_hz, &cfg.commands, |c| c.at_s);
     let mut host = Host {
-        dec: RobustDecoder::new(),
+        rx: HostRx::default(),
         pending: VecDeque::new(),
-        decoded: 0,
-        broken: 0,
         echoed_ok: 0,
         first_echo: None,
         failures: Vec::new(),
         failure_count: 0,
     };
-    let period = 1.0 / cfg.frame_hz;
-    let mut next_frame = 0.0;
-    let mut next_command = 0usize;
-    let onset = sc.fault_onset();
     // Moves to check at their end: (index, checked).
     let mut move_checked = vec![false; cfg.moves.len()];
 
     let mut s = Summary {
-        name: sc.name.clone(),
-        profile: sc.profile.name().into(),
-        onset_s: onset,
         joint_speed_excess_steps: Some(f64::NEG_INFINITY),
         joint_max_abs_rad: Some(0.0),
-        ..Summary::default()
+        ..Summary::new(sc)
     };
+    let names = (1..=JOINTS)
+        .map(|k| format!("joint {k} (deg)"))
+        .chain((1..=JOINTS).map(|k| format!("joint {k} command (deg)")));
     let mut series = Series {
+        lines: opts
+            .keep_series
+            .then(|| Panel::new("joint angles and commands (deg)", names)),
         thresholds: Some([params.hold_after, params.stop_after, params.brake_after]),
         ..Series::default()
     };
-    let mut lines: Vec<(String, Vec<f64>)> = (1..=JOINTS)
-        .map(|k| (format!("joint {k} (deg)"), Vec::new()))
-        .chain((1..=JOINTS).map(|k| (format!("joint {k} command (deg)"), Vec::new())))
-        .collect();
-    let mut last_valid: Option<(f64, u32)> = None;
-    let mut prev_mode = board.out.mode;
-    let mut brake_entries = board.safety().ladder().counters().brake_entries;
-    let mut rearm_delivered = false;
+    let mut watch = Watch::new(board.out.mode);
+    let mut rearm = Rearm::new(board.safety().ladder().counters());
     let mut comm_loss_braked = false;
     let mut steps_after_brake = 0u64;
     // The speed bound: the cap of the last accepted MTRS, and the bound in force, which falls
@@ -309,28 +266,14 @@ pub fn run(
     let mut at_last_tick = board.steps();
     let mut commanded: Option<[i32; JOINTS]> = None;
 
-    if let Some(w) = trace.as_deref_mut() {
-        writeln!(w, "t_s,mode,age,faults,cmd_deg_1,cmd_deg_2,cmd_deg_3,cmd_deg_4,ref_deg_1,ref_deg_2,ref_deg_3,ref_deg_4,joint_deg_1,joint_deg_2,joint_deg_3,joint_deg_4,steps_1,steps_2,steps_3,steps_4,end_effector,frames_sent,corrupted_sent,corrupted_applied,rejected,echoes,echo_errors")?;
-    }
+    let mut trace = Trace::new(sc, trace, "cmd_deg_1,cmd_deg_2,cmd_deg_3,cmd_deg_4,ref_deg_1,ref_deg_2,ref_deg_3,ref_deg_4,joint_deg_1,joint_deg_2,joint_deg_3,joint_deg_4,steps_1,steps_2,steps_3,steps_4,end_effector,frames_sent,corrupted_sent,corrupted_applied,rejected,echoes,echo_errors")?;
 
-    let steps = (sc.duration_s / STEP_S).ceil() as u64;
-    for n in 0..steps {
-        let t = n as f64 * STEP_S;
-        let paused = sc.faults.iter().any(|f| match *f {
-            Fault::GcPause { at_s, duration_s } => in_window(t, at_s, duration_s),
-            _ => false,
-        });
-        let cut = |x: f64| {
-            sc.faults.iter().any(|f| match *f {
-                Fault::LinkCut { at_s, duration_s } => in_window(x, at_s, duration_s),
-                _ => false,
-            })
-        };
+    for (n, t) in sc.steps(STEP_S) {
+        let paused = sc.host_paused(t);
 
         // The host writes: commands due, then the MTRS stream of the move in force.
         let mut outgoing: Vec<(Msg, bool)> = Vec::new();
-        while !paused && next_command < commands.len() && commands[next_command].at_s <= t {
-            let c = commands[next_command];
+        schedule.commands_due(t, paused, |_, c| {
             let msg = match c.cmd {
                 TeensyCmd::Cal => Msg {
                     cmd_type: CmdType::Cal,
@@ -356,71 +299,32 @@ pub fn run(
                 },
             };
             outgoing.push((msg, c.success));
-            next_command += 1;
-        }
-        while next_frame <= t {
-            if !paused {
-                if let Some(m) = cfg.move_at(next_frame) {
-                    outgoing.push((mtrs(m.deg, m.speed_deg_s), m.success));
-                }
+        });
+        schedule.frames_due(t, paused, |at| {
+            if let Some(m) = cfg.move_at(at) {
+                outgoing.push((mtrs(m.deg, m.speed_deg_s), m.success));
             }
-            next_frame += period;
-        }
+        });
         for (msg, want) in outgoing {
             let mut buf = [0u8; Msg::ROBUST_LEN];
             let Some(len) = msg.encode_robust(&mut buf) else {
                 continue;
             };
-            let bytes = &mut buf[..len];
-            let mut corrupted = false;
-            for f in &sc.faults {
-                if let Fault::Corruption {
-                    rate, from_s, to_s, ..
-                } = *f
-                {
-                    if t >= from_s && t < to_s && rng.chance(rate) {
-                        corrupted |= corrupt(bytes, &mut rng);
-                    }
-                }
-            }
-            let tag = sent.len();
-            corrupted |= down.write(t, bytes, tag, &mut rng) > 0;
+            let tag = link.write(sc, t, msg, &mut buf[..len], want, &mut rng);
             host.pending.push_back(tag);
-            sent.push(Sent {
-                msg,
-                t,
-                want,
-                corrupted,
-                lost: false,
-                decoded: false,
-            });
         }
 
         // link_rx: every byte that arrived.
-        while let Some(b) = down.arrived(t) {
-            if cut(b.at) {
-                sent[b.tag].lost = true;
-                continue;
-            }
-            let rep = board.on_byte(b.byte);
-            if let Some(Ok(m)) = monitor.push(b.byte) {
-                debug_assert!(rep.decoded);
-                if m != sent[b.tag].msg {
-                    s.corrupted_applied += 1;
-                } else {
-                    sent[b.tag].decoded = true;
-                }
+        while let Some((rep, m)) = link.link_rx(sc, t, &mut board, &mut s) {
+            if let Some(m) = m {
                 match m.cmd_type {
-                    CmdType::Cal => rearm_delivered = true,
+                    CmdType::Cal => rearm.deliver(),
                     CmdType::Mtrs if rep.valid => {
                         cap_cmd = f64::from(m.mtr_speed_deg_s).to_radians();
                         commanded = Some(m.mtr_angles);
                     }
                     _ => {}
                 }
-            }
-            if rep.valid {
-                last_valid = Some((t, board.safety().ticks()));
             }
         }
 
@@ -434,17 +338,8 @@ pub fn run(
         let ticked = n % STEPS_PER_TICK == 0 && n > 0;
         if ticked {
             board.tick();
-            let e = board.safety().ladder().counters().brake_entries;
-            if e != brake_entries {
-                brake_entries = e;
-                rearm_delivered = false;
-            }
-            if prev_mode == Mode::Brake && board.out.mode != Mode::Brake {
-                if !rearm_delivered {
-                    s.rearm_violations += 1;
-                }
-                rearm_delivered = false;
-            }
+            let c = board.safety().ladder().counters();
+            rearm.tick(c, watch.mode, board.out.mode, &mut s);
             // The joints' motion over the tick that ended, against the cap in force during it.
             let now = board.steps();
             let bound = cap_bound * steps_per_rad / 1000.0;
@@ -476,111 +371,59 @@ pub fn run(
         }
 
         // link_tx, and the host's side.
-        while up.idle_before(t + STEP_S) {
-            match board.tx_pop() {
-                Some(b) => {
-                    up.write(t, &[b], 0, &mut rng);
-                }
-                None => break,
-            }
-        }
-        while let Some(b) = up.arrived(t) {
-            if !cut(b.at) {
-                host.receive(t, b.byte, &sent);
-            }
-        }
+        link.link_tx(sc, t, STEP_S, &mut board, &mut rng, |b, sent| {
+            host.receive(t, b, sent)
+        });
 
         // Measurements.
         let out = board.out;
-        let since = |x: f64| onset.filter(|&o| x >= o).map(|o| (x - o) * 1e3);
-        if out.mode != prev_mode {
-            let after = since(t);
-            match out.mode {
-                Mode::Hold if s.hold_ms.is_none() => s.hold_ms = after,
-                Mode::Stop if s.stop_ms.is_none() => s.stop_ms = after,
-                Mode::Brake => {
-                    if s.brake_ms.is_none() {
-                        s.brake_ms = after;
-                    }
-                    if s.brake_after_last_frame_ms.is_none()
-                        && out.faults.contains(FaultFlags::COMM_LOST)
-                        && (onset.is_none() || after.is_some())
-                    {
-                        if let Some((lt, lticks)) = last_valid {
-                            let ms = (t - lt) * 1e3;
-                            s.brake_after_last_frame_ms = Some(ms);
-                            // The joints stop in this tick: the step targets are frozen.
-                            s.bridge_brake_after_last_frame_ms = Some(ms);
-                            s.brake_after_last_frame_ticks =
-                                Some(board.safety().ticks().wrapping_sub(lticks));
-                            comm_loss_braked = true;
-                        }
-                    }
-                }
-                _ => {}
-            }
-            prev_mode = out.mode;
+        if link.watch_mode(&mut watch, &mut s, t, &out, board.safety().ticks()) {
+            // The joints stop in this tick: the step targets are frozen.
+            s.bridge_brake_after_last_frame_ms = s.brake_after_last_frame_ms;
+            comm_loss_braked = true;
         }
 
-        if ticked {
-            let tick_index = n / STEPS_PER_TICK;
-            if tick_index % u64::from(sc.trace_every_ms) == 0 {
-                let cmd = commanded.map_or([f64::NAN; JOINTS], |d| d.map(f64::from));
-                let refs = board
-                    .joints()
-                    .positions()
-                    .map(|p| p.to_num::<f64>().to_degrees());
-                let steps_now = board.steps();
-                let deg = steps_now.map(|x| (f64::from(x) / steps_per_rad).to_degrees());
-                if opts.keep_series {
-                    series.t.push(t);
-                    series.mode.push(out.mode as u8);
-                    series.age.push(out.age);
-                    for k in 0..JOINTS {
-                        lines[k].1.push(deg[k]);
-                        lines[JOINTS + k].1.push(cmd[k]);
-                    }
-                }
-                if let Some(w) = trace.as_deref_mut() {
-                    writeln!(
-                        w,
-                        "{:.4},{},{},{:#06x},{},{},{},{},{:.3},{:.3},{:.3},{:.3},{:.3},{:.3},{:.3},{:.3},{},{},{},{},{},{},{},{},{},{},{}",
-                        t,
-                        mode_name(out.mode),
-                        out.age,
-                        out.faults.0,
-                        cmd[0],
-                        cmd[1],
-                        cmd[2],
-                        cmd[3],
-                        refs[0],
-                        refs[1],
-                        refs[2],
-                        refs[3],
-                        deg[0],
-                        deg[1],
-                        deg[2],
-                        deg[3],
-                        steps_now[0],
-                        steps_now[1],
-                        steps_now[2],
-                        steps_now[3],
-                        u8::from(board.end_effector),
-                        sent.len(),
-                        sent.iter().filter(|f| f.corrupted).count(),
-                        s.corrupted_applied,
-                        board.safety().ladder().counters().rejected_total(),
-                        host.decoded,
-                        host.broken,
-                    )?;
-                }
+        if ticked && trace.due(n / STEPS_PER_TICK) {
+            let cmd = commanded.map_or([f64::NAN; JOINTS], |d| d.map(f64::from));
+            let refs = board
+                .joints()
+                .positions()
+                .map(|p| p.to_num::<f64>().to_degrees());
+            let steps_now = board.steps();
+            let deg = steps_now.map(|x| (f64::from(x) / steps_per_rad).to_degrees());
+            if opts.keep_series {
+                series.push_tick(t, out.mode, out.age, deg.into_iter().chain(cmd));
+            }
+            if let Some(w) = trace.row(t, out.mode, out.age, out.faults)? {
+                write!(
+                    w,
+                    "{},{},{},{},{:.3},{:.3},{:.3},{:.3},{:.3},{:.3},{:.3},{:.3},{},{},{},{},{},",
+                    cmd[0],
+                    cmd[1],
+                    cmd[2],
+                    cmd[3],
+                    refs[0],
+                    refs[1],
+                    refs[2],
+                    refs[3],
+                    deg[0],
+                    deg[1],
+                    deg[2],
+                    deg[3],
+                    steps_now[0],
+                    steps_now[1],
+                    steps_now[2],
+                    steps_now[3],
+                    u8::from(board.end_effector),
+                )?;
+                link.trace_tail(w, &s, &board, host.rx.counts())?;
             }
         }
     }
 
     // Frames the board took at least 50 ms before the end must have been echoed by then.
     for k in std::mem::take(&mut host.pending) {
-        let f = &sent[k];
+        let f = &link.sent[k];
         if f.decoded && !f.lost && f.t < sc.duration_s - 0.05 {
             host.fail(format!(
                 "no echo of {:?} {:?} by the end",
@@ -600,31 +443,14 @@ pub fn run(
         }
     }
 
-    let c = board.safety().ladder().counters();
-    s.frames_sent = sent.len() as u64;
-    s.corrupted_sent = sent.iter().filter(|f| f.corrupted).count() as u64;
-    s.corrupted_rejected = sent
-        .iter()
-        .filter(|f| f.corrupted && !f.decoded && !f.lost)
-        .count() as u64;
-    s.rejected_total = u64::from(c.rejected_total());
-    s.brake_entries = u64::from(c.brake_entries);
-    s.rearms = u64::from(c.rearms);
-    s.final_mode = mode_name(board.out.mode).to_string();
-    s.replies = Some([host.decoded, host.broken]);
+    link.tally(&mut s);
+    s.replies = Some(host.rx.counts());
     if let Some(t0) = host.first_echo {
         s.host_reports.push((t0, "echo_ok".into(), host.echoed_ok));
     }
     s.reply_failures = host.failures;
     s.tx_dropped = u64::from(board.link().tx.dropped());
     s.steps_after_brake = comm_loss_braked.then_some(steps_after_brake);
-    s.sim_s = sc.duration_s;
-    s.wall_s = wall.elapsed().as_secs_f64();
-    if opts.keep_series {
-        series.lines = Some(Panel {
-            caption: "joint angles and commands (deg)".into(),
-            signals: lines,
-        });
-    }
+    s.finish(sc, wall, board.safety().ladder().counters(), board.out.mode);
     Ok(RunResult { summary: s, series })
 }
