@@ -33,7 +33,7 @@ use std::time::{Duration, Instant};
 
 use protocol::{cdc, teensy};
 use serde_json::{json, Map, Value};
-use statemachine::Estop;
+use statemachine::{Estop, RejectReason};
 
 use crate::cli::{with_motors, CdcJson, CmdMsgJson};
 use crate::pacing::{Pacer, PeriodStats};
@@ -353,85 +353,98 @@ fn pacing_json(stats: &PeriodStats) -> Value {
         "max_us": stats.max_us, "late": stats.late, "skipped": stats.skipped})
 }
 
-/// What a seed 001 session received, by kind.
-#[derive(Clone, Copy, Debug, Default)]
-struct CdcCounts {
-    status: u32,
-    status_motor_enabled: u32,
-    status_estop_latched: u32,
-    imu: u32,
-    ack: u32,
-    other: u32,
-    errors: u32,
-    last_status: Option<cdc::Status>,
+/// What the verbs need of a board link, for either protocol.
+trait BoardLink {
+    /// A message of the protocol.
+    type Msg: Copy;
+    /// Why the decoder refused a frame.
+    type Refused;
+    /// What a session counts of what it received.
+    type Counts: Counts<Self::Msg>;
+    /// The byte stream under the link.
+    type Stream: ByteStream;
+
+    /// The byte stream, for raw writes and its read timeout.
+    fn stream(&mut self) -> &mut Self::Stream;
+    /// Writes one message.
+    fn send(&mut self, m: &Self::Msg) -> Result<(), LinkError>;
+    /// One read: the messages it completed.
+    fn poll(&mut self) -> Result<Vec<Self::Msg>, LinkError>;
+    /// The frames the decoder refused since the last call.
+    fn refused(&mut self) -> Vec<Self::Refused>;
+    /// The decoder's counters, as printed.
+    fn decoder(&self) -> Value;
+    /// A message, as printed.
+    fn message_json(m: &Self::Msg) -> Value;
+    /// A refused frame, as printed (the fields of its line).
+    fn refused_json(r: &Self::Refused) -> Value;
+    /// What a reply to a command says: done or refused.
+    fn verdict(reply: &Self::Msg) -> Verdict;
 }
 
-impl CdcCounts {
-    fn add(&mut self, m: &cdc::Message) {
-        let inc = |c: &mut u32| *c = c.saturating_add(1);
-        match m {
-            cdc::Message::Status(s) => {
-                inc(&mut self.status);
-                if s.flags.has(cdc::StatusFlags::MOTOR_ENABLED) {
-                    inc(&mut self.status_motor_enabled);
-                }
-                if s.flags.has(cdc::StatusFlags::ESTOP_LATCHED) {
-                    inc(&mut self.status_estop_latched);
-                }
-                self.last_status = Some(*s);
-            }
-            cdc::Message::Imu(_) => inc(&mut self.imu),
-            cdc::Message::Ack(_) => inc(&mut self.ack),
-            _ => inc(&mut self.other),
+/// What a session counts of the messages it received.
+trait Counts<M>: Default {
+    /// One message.
+    fn add(&mut self, m: &M);
+    /// One frame the decoder refused.
+    fn refused(&mut self);
+    /// The counts, as printed in `received`.
+    fn json(&self) -> Value;
+}
+
+/// A board link with its printer and counts.
+struct Session<'a, L: BoardLink> {
+    link: L,
+    out: Lines<'a>,
+    rx: L::Counts,
+}
+
+impl<'a, L: BoardLink> Session<'a, L> {
+    /// A session over `link` that prints through `sink`, its clock started now.
+    fn new(link: L, sink: &'a mut dyn FnMut(Value)) -> Self {
+        Self {
+            link,
+            out: Lines {
+                t0: Instant::now(),
+                sink,
+            },
+            rx: L::Counts::default(),
         }
     }
 
-    fn json(&self) -> Value {
-        json!({"status": self.status, "status_motor_enabled": self.status_motor_enabled,
-            "status_estop_latched": self.status_estop_latched, "imu": self.imu, "ack": self.ack,
-            "other": self.other, "errors": self.errors,
-            "last_status": self.last_status.map(|s| CdcJson::from(cdc::Message::Status(s)))})
-    }
-}
-
-/// A seed 001 link with its printer and counts.
-struct Cdc<'a, S: ByteStream> {
-    link: CdcLink<S>,
-    out: Lines<'a>,
-    rx: CdcCounts,
-}
-
-impl<S: ByteStream> Cdc<'_, S> {
-    fn send(&mut self, m: &cdc::Message) -> Result<(), String> {
+    fn send(&mut self, m: &L::Msg) -> Result<(), String> {
         self.link.send(m).map_err(err)
     }
 
     /// One read of at most `window`: prints and counts every frame; returns the messages.
-    fn listen(&mut self, window: Duration) -> Result<Vec<cdc::Message>, String> {
+    fn listen(&mut self, window: Duration) -> Result<Vec<L::Msg>, String> {
         self.link
-            .stream
+            .stream()
             .set_read_timeout(window.min(MAX_READ))
             .map_err(err)?;
         let got = self.link.poll().map_err(err)?;
         for m in &got {
             self.rx.add(m);
-            self.out.put(json!({"message": CdcJson::from(*m)}));
+            self.out.put(json!({"message": L::message_json(m)}));
         }
-        for e in self.link.errors.drain(..) {
-            self.rx.errors = self.rx.errors.saturating_add(1);
-            self.out
-                .put(json!({"error": format!("{e:?}"), "code": e as u8,
-                "reason": format!("{:?}", e.reason()), "reason_code": e.reason() as u8}));
+        for r in self.link.refused() {
+            self.rx.refused();
+            self.out.put(L::refused_json(&r));
         }
         Ok(got)
+    }
+
+    /// What the session received, as printed in `received`.
+    fn received(&self) -> Value {
+        self.rx.json()
     }
 
     /// Reads until a message satisfying `is_reply` arrives (returned with its arrival) or `deadline`.
     fn wait_for(
         &mut self,
         deadline: Instant,
-        is_reply: impl Fn(&cdc::Message) -> bool,
-    ) -> Result<Option<(cdc::Message, Instant)>, String> {
+        is_reply: impl Fn(&L::Msg) -> bool,
+    ) -> Result<Option<(L::Msg, Instant)>, String> {
         loop {
             let left = deadline.saturating_duration_since(Instant::now());
             if left.is_zero() {
@@ -442,66 +455,41 @@ impl<S: ByteStream> Cdc<'_, S> {
             }
         }
     }
-
-    fn decoder(&self) -> Value {
-        json!(self.link.stats())
-    }
 }
 
-fn is_ack_of(id: cdc::MsgId) -> impl Fn(&cdc::Message) -> bool {
-    move |m| matches!(m, cdc::Message::Ack(a) if a.msg_id == id as u8)
+/// `send-hex`: the bytes as given, then every reply within the listening time.
+fn send_hex<L: BoardLink>(s: &mut Session<'_, L>, h: &SendHex) -> Result<Verdict, String> {
+    s.link.stream().write_all(&h.bytes).map_err(err)?;
+    s.out
+        .put(json!({"sent_hex": crate::cli::to_hex(&h.bytes), "bytes": h.bytes.len()}));
+    let end = after(Instant::now(), h.listen);
+    s.wait_for(end, |_| false)?;
+    let decoder = s.link.decoder();
+    s.out.put(
+        json!({"verdict": Verdict::Done.as_str(), "received": s.received(), "decoder": decoder}),
+    );
+    Ok(Verdict::Done)
 }
 
-/// Runs a seed 001 verb over `stream`, waiting up to `wait` for each reply; prints through `sink`.
-pub fn run_cdc(
-    stream: impl ByteStream,
-    verb: &CdcVerb,
-    wait: Duration,
-    sink: &mut dyn FnMut(Value),
-) -> Result<Verdict, String> {
-    let mut s = Cdc {
-        link: CdcLink::new(stream),
-        out: Lines {
-            t0: Instant::now(),
-            sink,
-        },
-        rx: CdcCounts::default(),
-    };
-    match verb {
-        CdcVerb::Ping { count } => cdc_ping(&mut s, *count, wait),
-        CdcVerb::Enable(on) => cdc_command(&mut s, cdc::Message::MotorEnable(*on), wait),
-        CdcVerb::Estop(a) => cdc_command(&mut s, cdc::Message::Estop(*a), wait),
-        CdcVerb::Drive(plan) => cdc_drive(&mut s, plan, wait),
-        CdcVerb::SendHex(h) => {
-            s.link.stream.write_all(&h.bytes).map_err(err)?;
-            s.out
-                .put(json!({"sent_hex": crate::cli::to_hex(&h.bytes), "bytes": h.bytes.len()}));
-            let end = after(Instant::now(), h.listen);
-            s.wait_for(end, |_| false)?;
-            let decoder = s.decoder();
-            s.out.put(json!({"verdict": Verdict::Done.as_str(), "received": s.rx.json(), "decoder": decoder}));
-            Ok(Verdict::Done)
-        }
-    }
-}
-
-fn cdc_ping<S: ByteStream>(
-    s: &mut Cdc<'_, S>,
+/// `count` round trips of `probe`, each waiting up to `wait` for a message satisfying `is_reply`.
+fn ping<L: BoardLink>(
+    s: &mut Session<'_, L>,
+    probe: L::Msg,
+    is_reply: impl Fn(&L::Msg) -> bool,
     count: u32,
     wait: Duration,
 ) -> Result<Verdict, String> {
-    let is_reply =
-        |m: &cdc::Message| matches!(m, cdc::Message::Status(_)) || is_ack_of(cdc::MsgId::Ping)(m);
     let mut rtts = Vec::new();
     for i in 0..count {
         let t = Instant::now();
-        s.send(&cdc::Message::Ping)?;
-        match s.wait_for(after(t, wait), is_reply)? {
+        s.send(&probe)?;
+        match s.wait_for(after(t, wait), &is_reply)? {
             Some((m, at)) => {
                 let rtt = at.duration_since(t);
                 rtts.push(rtt);
-                s.out
-                    .put(json!({"ping": i, "round_trip_us": us(rtt), "reply": CdcJson::from(m)}));
+                s.out.put(
+                    json!({"ping": i, "round_trip_us": us(rtt), "reply": L::message_json(&m)}),
+                );
             }
             None => s.out.put(json!({"ping": i, "no_reply_ms": ms(wait)})),
         }
@@ -511,7 +499,7 @@ fn cdc_ping<S: ByteStream>(
     } else {
         Verdict::Done
     };
-    let decoder = s.decoder();
+    let decoder = s.link.decoder();
     s.out.put(
         json!({"verdict": verdict.as_str(), "sent": count, "replies": rtts.len(),
         "round_trip_us": rtt_json(&rtts), "decoder": decoder}),
@@ -527,26 +515,24 @@ fn rtt_json(rtts: &[Duration]) -> Value {
     json!({"min": us(*min), "max": us(*max), "mean": (sum / rtts.len() as f64 * 1e6).round()})
 }
 
-fn cdc_command<S: ByteStream>(
-    s: &mut Cdc<'_, S>,
-    msg: cdc::Message,
+/// Sends `msg` and waits up to `wait` for its reply, a message satisfying `is_reply`.
+fn command<L: BoardLink>(
+    s: &mut Session<'_, L>,
+    msg: L::Msg,
+    is_reply: impl Fn(&L::Msg) -> bool,
     wait: Duration,
 ) -> Result<Verdict, String> {
     let t = Instant::now();
     s.send(&msg)?;
-    let sent = CdcJson::from(msg);
-    let (verdict, line) = match s.wait_for(after(t, wait), is_ack_of(msg.id()))? {
-        Some((m @ cdc::Message::Ack(a), at)) => {
-            let v = if a.result == 0 {
-                Verdict::Done
-            } else {
-                Verdict::Refused
-            };
-            let line = json!({"verdict": v.as_str(), "sent": sent, "reply": CdcJson::from(m),
+    let sent = L::message_json(&msg);
+    let (verdict, line) = match s.wait_for(after(t, wait), is_reply)? {
+        Some((m, at)) => {
+            let v = L::verdict(&m);
+            let line = json!({"verdict": v.as_str(), "sent": sent, "reply": L::message_json(&m),
                 "round_trip_us": us(at.duration_since(t))});
             (v, line)
         }
-        _ => (
+        None => (
             Verdict::NoReply,
             json!({"verdict": Verdict::NoReply.as_str(), "sent": sent, "waited_ms": ms(wait)}),
         ),
@@ -583,6 +569,28 @@ impl<M: Copy> Pending<M> {
 
     fn waiting(&self) -> bool {
         matches!(self, Self::Waiting(_))
+    }
+
+    /// What the reply says, if it stops a paced verb: a refusal ([`BoardLink::verdict`]), or no
+    /// reply within `wait`.
+    fn verdict<L: BoardLink<Msg = M>>(&self, wait: Duration) -> Option<Verdict> {
+        match self {
+            Self::Answered(m, _) if L::verdict(m) == Verdict::Refused => Some(Verdict::Refused),
+            p if p.overdue(wait) => Some(Verdict::NoReply),
+            _ => None,
+        }
+    }
+
+    /// The reply as the verb's last line prints it: none asked for, none within `wait`, or the
+    /// reply and its round trip.
+    fn json<L: BoardLink<Msg = M>>(&self, wait: Duration) -> Value {
+        match self {
+            Self::None => Value::Null,
+            Self::Waiting(_) => json!({"no_reply_ms": ms(wait)}),
+            Self::Answered(m, rtt) => {
+                json!({"reply": L::message_json(m), "round_trip_us": us(*rtt)})
+            }
+        }
     }
 }
 
@@ -635,6 +643,124 @@ fn paced<E>(
     }
 }
 
+/// What a seed 001 session received, by kind.
+#[derive(Clone, Copy, Debug, Default)]
+struct CdcCounts {
+    status: u32,
+    status_motor_enabled: u32,
+    status_estop_latched: u32,
+    imu: u32,
+    ack: u32,
+    other: u32,
+    errors: u32,
+    last_status: Option<cdc::Status>,
+}
+
+impl Counts<cdc::Message> for CdcCounts {
+    fn add(&mut self, m: &cdc::Message) {
+        let inc = |c: &mut u32| *c = c.saturating_add(1);
+        match m {
+            cdc::Message::Status(s) => {
+                inc(&mut self.status);
+                if s.flags.has(cdc::StatusFlags::MOTOR_ENABLED) {
+                    inc(&mut self.status_motor_enabled);
+                }
+                if s.flags.has(cdc::StatusFlags::ESTOP_LATCHED) {
+                    inc(&mut self.status_estop_latched);
+                }
+                self.last_status = Some(*s);
+            }
+            cdc::Message::Imu(_) => inc(&mut self.imu),
+            cdc::Message::Ack(_) => inc(&mut self.ack),
+            _ => inc(&mut self.other),
+        }
+    }
+
+    fn refused(&mut self) {
+        self.errors = self.errors.saturating_add(1);
+    }
+
+    fn json(&self) -> Value {
+        json!({"status": self.status, "status_motor_enabled": self.status_motor_enabled,
+            "status_estop_latched": self.status_estop_latched, "imu": self.imu, "ack": self.ack,
+            "other": self.other, "errors": self.errors,
+            "last_status": self.last_status.map(|s| CdcJson::from(cdc::Message::Status(s)))})
+    }
+}
+
+impl<S: ByteStream> BoardLink for CdcLink<S> {
+    type Msg = cdc::Message;
+    type Refused = cdc::Error;
+    type Counts = CdcCounts;
+    type Stream = S;
+
+    fn stream(&mut self) -> &mut S {
+        &mut self.stream
+    }
+
+    fn send(&mut self, m: &cdc::Message) -> Result<(), LinkError> {
+        CdcLink::send(self, m)
+    }
+
+    fn poll(&mut self) -> Result<Vec<cdc::Message>, LinkError> {
+        CdcLink::poll(self)
+    }
+
+    fn refused(&mut self) -> Vec<cdc::Error> {
+        self.errors.drain(..).collect()
+    }
+
+    fn decoder(&self) -> Value {
+        json!(self.stats())
+    }
+
+    fn message_json(m: &cdc::Message) -> Value {
+        json!(CdcJson::from(*m))
+    }
+
+    fn refused_json(e: &cdc::Error) -> Value {
+        json!({"error": format!("{e:?}"), "code": *e as u8,
+            "reason": format!("{:?}", e.reason()), "reason_code": e.reason() as u8})
+    }
+
+    fn verdict(reply: &cdc::Message) -> Verdict {
+        match reply {
+            cdc::Message::Ack(a) if a.result == 0 => Verdict::Done,
+            _ => Verdict::Refused,
+        }
+    }
+}
+
+/// A seed 001 session.
+type Cdc<'a, S> = Session<'a, CdcLink<S>>;
+
+fn is_ack_of(id: cdc::MsgId) -> impl Fn(&cdc::Message) -> bool {
+    move |m| matches!(m, cdc::Message::Ack(a) if a.msg_id == id as u8)
+}
+
+/// Runs a seed 001 verb over `stream`, waiting up to `wait` for each reply; prints through `sink`.
+pub fn run_cdc(
+    stream: impl ByteStream,
+    verb: &CdcVerb,
+    wait: Duration,
+    sink: &mut dyn FnMut(Value),
+) -> Result<Verdict, String> {
+    let mut s = Session::new(CdcLink::new(stream), sink);
+    let acked = |s: &mut Cdc<'_, _>, msg: cdc::Message| command(s, msg, is_ack_of(msg.id()), wait);
+    match verb {
+        CdcVerb::Ping { count } => {
+            let is_reply = |m: &cdc::Message| {
+                matches!(m, cdc::Message::Status(_)) || is_ack_of(cdc::MsgId::Ping)(m)
+            };
+            ping(&mut s, cdc::Message::Ping, is_reply, *count, wait)
+        }
+        CdcVerb::Enable(on) => acked(&mut s, cdc::Message::MotorEnable(*on)),
+        CdcVerb::Estop(a) => acked(&mut s, cdc::Message::Estop(*a)),
+        CdcVerb::Drive(plan) => cdc_drive(&mut s, plan, wait),
+        CdcVerb::SendHex(h) => send_hex(&mut s, h),
+    }
+}
+
 fn cdc_drive<S: ByteStream>(
     s: &mut Cdc<'_, S>,
     plan: &DrivePlan,
@@ -670,13 +796,7 @@ fn cdc_drive<S: ByteStream>(
             for m in e.s.listen(window)? {
                 e.enable.take(&m, &is_enable_ack);
             }
-            Ok(match &e.enable {
-                Pending::Answered(cdc::Message::Ack(a), _) if a.result != 0 => {
-                    Some(Verdict::Refused)
-                }
-                p if p.overdue(wait) => Some(Verdict::NoReply),
-                _ => None,
-            })
+            Ok(e.enable.verdict::<CdcLink<S>>(wait))
         },
         |e| e.enable.waiting(),
         &mut env,
@@ -687,18 +807,12 @@ fn cdc_drive<S: ByteStream>(
         None if !heard && plan.duration >= HEARD_WITHIN => Verdict::NoReply,
         None => Verdict::Done,
     };
-    let enable = match &env.enable {
-        Pending::None => Value::Null,
-        Pending::Waiting(_) => json!({"no_reply_ms": ms(wait)}),
-        Pending::Answered(m, rtt) => {
-            json!({"reply": CdcJson::from(*m), "round_trip_us": us(*rtt)})
-        }
-    };
+    let enable = env.enable.json::<CdcLink<S>>(wait);
     let s = env.s;
-    let decoder = s.decoder();
+    let decoder = s.link.decoder();
     s.out.put(
         json!({"verdict": verdict.as_str(), "frames_sent": sent, "enable": enable,
-        "received": s.rx.json(), "decoder": decoder, "pacing": pacing_json(&pacing),
+        "received": s.received(), "decoder": decoder, "pacing": pacing_json(&pacing),
         "stopped_early": early.is_some()}),
     );
     Ok(verdict)
@@ -711,60 +825,65 @@ struct TeensyCounts {
     errors: u32,
 }
 
-/// A seed 003 link with its printer and counts.
-struct Teensy<'a, S: ByteStream, const N: usize> {
-    link: TeensyLink<S, N>,
-    out: Lines<'a>,
-    rx: TeensyCounts,
+impl<const N: usize> Counts<teensy::CmdMsg<N>> for TeensyCounts {
+    fn add(&mut self, _: &teensy::CmdMsg<N>) {
+        self.messages = self.messages.saturating_add(1);
+    }
+
+    fn refused(&mut self) {
+        self.errors = self.errors.saturating_add(1);
+    }
+
+    fn json(&self) -> Value {
+        json!({"messages": self.messages, "errors": self.errors})
+    }
 }
 
-impl<S: ByteStream, const N: usize> Teensy<'_, S, N> {
-    fn send(&mut self, m: &teensy::CmdMsg<N>) -> Result<(), String> {
-        self.link.send(m).map_err(err)
+impl<S: ByteStream, const N: usize> BoardLink for TeensyLink<S, N> {
+    type Msg = teensy::CmdMsg<N>;
+    type Refused = RejectReason;
+    type Counts = TeensyCounts;
+    type Stream = S;
+
+    fn stream(&mut self) -> &mut S {
+        &mut self.stream
     }
 
-    fn listen(&mut self, window: Duration) -> Result<Vec<teensy::CmdMsg<N>>, String> {
-        self.link
-            .stream
-            .set_read_timeout(window.min(MAX_READ))
-            .map_err(err)?;
-        let got = self.link.poll().map_err(err)?;
-        for m in &got {
-            self.rx.messages = self.rx.messages.saturating_add(1);
-            self.out.put(json!({"message": CmdMsgJson::from(m)}));
-        }
-        for r in self.link.errors.drain(..) {
-            self.rx.errors = self.rx.errors.saturating_add(1);
-            self.out
-                .put(json!({"reason": format!("{r:?}"), "reason_code": r as u8}));
-        }
-        Ok(got)
+    fn send(&mut self, m: &teensy::CmdMsg<N>) -> Result<(), LinkError> {
+        TeensyLink::send(self, m)
     }
 
-    fn wait_for(
-        &mut self,
-        deadline: Instant,
-        is_reply: impl Fn(&teensy::CmdMsg<N>) -> bool,
-    ) -> Result<Option<(teensy::CmdMsg<N>, Instant)>, String> {
-        loop {
-            let left = deadline.saturating_duration_since(Instant::now());
-            if left.is_zero() {
-                return Ok(None);
-            }
-            if let Some(m) = self.listen(left)?.into_iter().find(&is_reply) {
-                return Ok(Some((m, Instant::now())));
-            }
-        }
+    fn poll(&mut self) -> Result<Vec<teensy::CmdMsg<N>>, LinkError> {
+        TeensyLink::poll(self)
+    }
+
+    fn refused(&mut self) -> Vec<RejectReason> {
+        self.errors.drain(..).collect()
     }
 
     fn decoder(&self) -> Value {
-        json!(self.link.stats())
+        json!(self.stats())
     }
 
-    fn counts(&self) -> Value {
-        json!({"messages": self.rx.messages, "errors": self.rx.errors})
+    fn message_json(m: &teensy::CmdMsg<N>) -> Value {
+        json!(CmdMsgJson::from(m))
+    }
+
+    fn refused_json(r: &RejectReason) -> Value {
+        json!({"reason": format!("{r:?}"), "reason_code": *r as u8})
+    }
+
+    fn verdict(reply: &teensy::CmdMsg<N>) -> Verdict {
+        if reply.cmd_success != 0 {
+            Verdict::Done
+        } else {
+            Verdict::Refused
+        }
     }
 }
+
+/// A seed 003 session with `N` joints.
+type Teensy<'a, S, const N: usize> = Session<'a, TeensyLink<S, N>>;
 
 /// The echo of `sent`: the same command, whatever its `cmd_success`.
 fn is_echo_of<const N: usize>(sent: teensy::CmdMsg<N>) -> impl Fn(&teensy::CmdMsg<N>) -> bool {
@@ -796,107 +915,32 @@ fn run_teensy_n<const N: usize>(
     wait: Duration,
     sink: &mut dyn FnMut(Value),
 ) -> Result<Verdict, String> {
-    let mut s = Teensy::<_, N> {
-        link: TeensyLink::new(stream),
-        out: Lines {
-            t0: Instant::now(),
-            sink,
-        },
-        rx: TeensyCounts::default(),
-    };
+    let mut s = Session::new(TeensyLink::<_, N>::new(stream), sink);
+    let echoed = |s: &mut Teensy<'_, _, N>, msg| command(s, msg, is_echo_of(msg), wait);
     match verb {
-        TeensyVerb::Ping { count } => teensy_ping(&mut s, *count, wait),
-        TeensyVerb::Cal => teensy_command(&mut s, cmd(teensy::CmdType::Cal), wait),
+        TeensyVerb::Ping { count } => {
+            let probe = cmd::<N>(teensy::CmdType::EndeffOff);
+            ping(&mut s, probe, is_echo_of(probe), *count, wait)
+        }
+        TeensyVerb::Cal => echoed(&mut s, cmd(teensy::CmdType::Cal)),
         TeensyVerb::Endeff(on) => {
             let t = if *on {
                 teensy::CmdType::EndeffOn
             } else {
                 teensy::CmdType::EndeffOff
             };
-            teensy_command(&mut s, cmd(t), wait)
+            echoed(&mut s, cmd(t))
         }
         TeensyVerb::Config { accel_deg_s2 } => {
             let c = teensy::CmdMsg {
                 mtr_accel_deg_s_s: *accel_deg_s2,
                 ..cmd(teensy::CmdType::Config)
             };
-            teensy_command(&mut s, c, wait)
+            echoed(&mut s, c)
         }
         TeensyVerb::Move(plan) => teensy_move(&mut s, plan, wait),
-        TeensyVerb::SendHex(h) => {
-            s.link.stream.write_all(&h.bytes).map_err(err)?;
-            s.out
-                .put(json!({"sent_hex": crate::cli::to_hex(&h.bytes), "bytes": h.bytes.len()}));
-            let end = after(Instant::now(), h.listen);
-            s.wait_for(end, |_| false)?;
-            let decoder = s.decoder();
-            let received = s.counts();
-            s.out.put(json!({"verdict": Verdict::Done.as_str(), "received": received, "decoder": decoder}));
-            Ok(Verdict::Done)
-        }
+        TeensyVerb::SendHex(h) => send_hex(&mut s, h),
     }
-}
-
-fn teensy_ping<S: ByteStream, const N: usize>(
-    s: &mut Teensy<'_, S, N>,
-    count: u32,
-    wait: Duration,
-) -> Result<Verdict, String> {
-    let probe = cmd::<N>(teensy::CmdType::EndeffOff);
-    let mut rtts = Vec::new();
-    for i in 0..count {
-        let t = Instant::now();
-        s.send(&probe)?;
-        match s.wait_for(after(t, wait), is_echo_of(probe))? {
-            Some((m, at)) => {
-                let rtt = at.duration_since(t);
-                rtts.push(rtt);
-                s.out.put(
-                    json!({"ping": i, "round_trip_us": us(rtt), "reply": CmdMsgJson::from(&m)}),
-                );
-            }
-            None => s.out.put(json!({"ping": i, "no_reply_ms": ms(wait)})),
-        }
-    }
-    let verdict = if rtts.is_empty() {
-        Verdict::NoReply
-    } else {
-        Verdict::Done
-    };
-    let decoder = s.decoder();
-    s.out.put(
-        json!({"verdict": verdict.as_str(), "sent": count, "replies": rtts.len(),
-        "round_trip_us": rtt_json(&rtts), "decoder": decoder}),
-    );
-    Ok(verdict)
-}
-
-fn teensy_command<S: ByteStream, const N: usize>(
-    s: &mut Teensy<'_, S, N>,
-    msg: teensy::CmdMsg<N>,
-    wait: Duration,
-) -> Result<Verdict, String> {
-    let t = Instant::now();
-    s.send(&msg)?;
-    let sent = CmdMsgJson::from(&msg);
-    let (verdict, line) = match s.wait_for(after(t, wait), is_echo_of(msg))? {
-        Some((m, at)) => {
-            let v = if m.cmd_success != 0 {
-                Verdict::Done
-            } else {
-                Verdict::Refused
-            };
-            let line = json!({"verdict": v.as_str(), "sent": sent, "reply": CmdMsgJson::from(&m),
-                "round_trip_us": us(at.duration_since(t))});
-            (v, line)
-        }
-        None => (
-            Verdict::NoReply,
-            json!({"verdict": Verdict::NoReply.as_str(), "sent": sent, "waited_ms": ms(wait)}),
-        ),
-    };
-    s.out.put(line);
-    Ok(verdict)
 }
 
 fn teensy_move<S: ByteStream, const N: usize>(
@@ -973,29 +1017,21 @@ fn teensy_move<S: ByteStream, const N: usize>(
                     }
                 }
             }
-            Ok(match &e.cal {
-                _ if e.echoes_refused > 0 => Some(Verdict::Refused),
-                Pending::Answered(m, _) if m.cmd_success == 0 => Some(Verdict::Refused),
-                p if p.overdue(wait) => Some(Verdict::NoReply),
-                _ if e.echo_overdue(wait) => Some(Verdict::NoReply),
-                _ => None,
-            })
+            if e.echoes_refused > 0 {
+                return Ok(Some(Verdict::Refused));
+            }
+            let cal = e.cal.verdict::<TeensyLink<S, N>>(wait);
+            Ok(cal.or_else(|| e.echo_overdue(wait).then_some(Verdict::NoReply)))
         },
         |e| e.cal.waiting() || e.echoes() < e.mtrs_sent,
         &mut env,
     )?;
     let verdict = early.unwrap_or(Verdict::Done);
-    let cal_json = match &env.cal {
-        Pending::None => Value::Null,
-        Pending::Waiting(_) => json!({"no_reply_ms": ms(wait)}),
-        Pending::Answered(m, rtt) => {
-            json!({"reply": CmdMsgJson::from(m), "round_trip_us": us(*rtt)})
-        }
-    };
+    let cal_json = env.cal.json::<TeensyLink<S, N>>(wait);
     let (sent, ok, refused) = (env.mtrs_sent, env.echoes_ok, env.echoes_refused);
     let s = env.s;
-    let decoder = s.decoder();
-    let received = s.counts();
+    let decoder = s.link.decoder();
+    let received = s.received();
     s.out.put(json!({"verdict": verdict.as_str(), "mtrs_sent": sent, "echoes_ok": ok,
         "echoes_refused": refused, "echoes_missing": sent.saturating_sub(ok.saturating_add(refused)),
         "cal": cal_json, "received": received, "decoder": decoder, "pacing": pacing_json(&pacing),

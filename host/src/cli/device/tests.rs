@@ -125,14 +125,7 @@ fn drive_enable_sends_a_frame_first_then_the_enable_then_keeps_the_frames_coming
     let plan = DrivePlan::new(&[100, 0, 0, -100], 50, 100.0, 0.03, true).unwrap();
     let mut written = Vec::new();
     let (v, lines) = collect(|sink| {
-        let mut s = Cdc {
-            link: CdcLink::new(stream),
-            out: Lines {
-                t0: Instant::now(),
-                sink,
-            },
-            rx: CdcCounts::default(),
-        };
+        let mut s = Session::new(CdcLink::new(stream), sink);
         let v = cdc_drive(&mut s, &plan, WAIT);
         written = s.link.stream.written.clone();
         v
