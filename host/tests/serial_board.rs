@@ -327,6 +327,13 @@ fn motorlink(args: &[&str]) -> (i32, Vec<Value>, String) {
     )
 }
 
+/// The binary with `args` and the generous reply wait.
+fn waiting(args: &[&str]) -> (i32, Vec<Value>, String) {
+    let mut a = args.to_vec();
+    a.extend_from_slice(&["--wait-ms", WAIT_MS]);
+    motorlink(&a)
+}
+
 fn last(lines: &[Value]) -> &Value {
     lines.last().expect("at least the verdict line")
 }
@@ -360,16 +367,7 @@ fn serial_ping_is_answered_by_the_boards_status() {
 
     // The same from the binary, which opens the pty anew.
     let dev = board.path.as_str();
-    let (code, lines, err) = motorlink(&[
-        "ping",
-        "--kind",
-        "serial",
-        dev,
-        "--count",
-        "2",
-        "--wait-ms",
-        WAIT_MS,
-    ]);
+    let (code, lines, err) = waiting(&["ping", "--kind", "serial", dev, "--count", "2"]);
     assert_eq!(code, 0, "{err}");
     assert_eq!(last(&lines)["replies"], 2);
 }
@@ -445,7 +443,7 @@ fn drive_with_enable_runs_the_motors_at_the_commanded_duties_and_the_board_brake
 fn estop_brakes_enable_is_then_refused_a_corrupted_release_changes_nothing_and_release_is_acked() {
     let board = FakeBoard::start(CdcBoard::new());
     let dev = board.path.as_str();
-    let (code, lines, err) = motorlink(&[
+    let (code, lines, err) = waiting(&[
         "drive",
         dev,
         "--pwm",
@@ -453,8 +451,6 @@ fn estop_brakes_enable_is_then_refused_a_corrupted_release_changes_nothing_and_r
         "--seconds",
         "0.3",
         "--enable",
-        "--wait-ms",
-        WAIT_MS,
     ]);
     assert_eq!(code, 0, "{err} {lines:?}");
     assert!(
@@ -462,15 +458,7 @@ fn estop_brakes_enable_is_then_refused_a_corrupted_release_changes_nothing_and_r
         "it drove"
     );
 
-    let (code, lines, err) = motorlink(&[
-        "estop",
-        "engage",
-        "--kind",
-        "serial",
-        dev,
-        "--wait-ms",
-        WAIT_MS,
-    ]);
+    let (code, lines, err) = waiting(&["estop", "engage", "--kind", "serial", dev]);
     assert_eq!(code, 0, "{err}");
     let end = last(&lines);
     assert_eq!(end["verdict"], "done");
@@ -483,15 +471,7 @@ fn estop_brakes_enable_is_then_refused_a_corrupted_release_changes_nothing_and_r
     });
 
     // The safety core refuses to re-arm while the ESTOP is engaged: ACK result 1, exit status 1.
-    let (code, lines, err) = motorlink(&[
-        "enable",
-        "on",
-        "--kind",
-        "serial",
-        dev,
-        "--wait-ms",
-        WAIT_MS,
-    ]);
+    let (code, lines, err) = waiting(&["enable", "on", "--kind", "serial", dev]);
     assert_eq!(code, 1, "{err} {lines:?}");
     let end = last(&lines);
     assert_eq!(end["verdict"], "refused");
@@ -523,7 +503,7 @@ fn estop_brakes_enable_is_then_refused_a_corrupted_release_changes_nothing_and_r
         assert_eq!(b.link.stats().crc_errors, 1);
     });
 
-    let (code, lines, err) = motorlink(&["estop", "release", dev, "--wait-ms", WAIT_MS]);
+    let (code, lines, err) = waiting(&["estop", "release", dev]);
     assert_eq!(code, 0, "{err}");
     assert_eq!(last(&lines)["reply"]["result"], 0);
     board.with(|b| {
@@ -537,7 +517,7 @@ fn estop_brakes_enable_is_then_refused_a_corrupted_release_changes_nothing_and_r
 
     // Re-armed and driven again.
     let from = board.with(|b| b.seen.len());
-    let (code, lines, err) = motorlink(&[
+    let (code, lines, err) = waiting(&[
         "drive",
         dev,
         "--pwm",
@@ -545,8 +525,6 @@ fn estop_brakes_enable_is_then_refused_a_corrupted_release_changes_nothing_and_r
         "--seconds",
         "0.3",
         "--enable",
-        "--wait-ms",
-        WAIT_MS,
     ]);
     assert_eq!(code, 0, "{err} {lines:?}");
     assert_eq!(last(&lines)["enable"]["reply"]["result"], 0);
@@ -564,7 +542,7 @@ fn an_enable_waits_for_the_first_frame_within_the_threshold_and_no_longer() {
         board.wait_until(Duration::from_secs(5), |b| b.ticks > 300),
         "past the power-on age"
     );
-    let (code, lines, err) = motorlink(&["enable", "on", dev, "--wait-ms", WAIT_MS]);
+    let (code, lines, err) = waiting(&["enable", "on", dev]);
     assert_eq!(code, 0, "{err}");
     assert_eq!(last(&lines)["reply"]["result"], 0, "accepted, pending");
     let from = board.with(|b| b.seen.len());
@@ -579,7 +557,7 @@ fn an_enable_waits_for_the_first_frame_within_the_threshold_and_no_longer() {
     });
     // Let the drive brake on comm loss, then enable and stay silent past the threshold.
     assert!(board.wait_until(Duration::from_secs(5), |b| b.safety.mode() == Mode::Brake));
-    let (code, _, err) = motorlink(&["enable", "on", dev, "--wait-ms", WAIT_MS]);
+    let (code, _, err) = waiting(&["enable", "on", dev]);
     assert_eq!(code, 0, "{err}");
     std::thread::sleep(Duration::from_millis(600));
     let from = board.with(|b| b.seen.len());
@@ -696,7 +674,7 @@ fn teensy_cal_and_move_are_echoed_with_success_and_the_arm_moves() {
 
     // A relative move is refused: exit status 1, and sending stops at the refusal.
     let dev = board.path.as_str();
-    let (code, lines, err) = motorlink(&[
+    let (code, lines, err) = waiting(&[
         "move",
         dev,
         "--angles",
@@ -706,8 +684,6 @@ fn teensy_cal_and_move_are_echoed_with_success_and_the_arm_moves() {
         "--relative",
         "--seconds",
         "0.5",
-        "--wait-ms",
-        WAIT_MS,
     ]);
     assert_eq!(code, 1, "{err}");
     let end = last(&lines);
@@ -723,8 +699,8 @@ fn teensy_cal_endeff_config_ping_and_a_corrupted_frame() {
     let dev = board.path.as_str();
     let run = |args: &[&str]| {
         let mut a = args.to_vec();
-        a.extend_from_slice(&[dev, "--kind", "teensy", "--wait-ms", WAIT_MS]);
-        motorlink(&a)
+        a.extend_from_slice(&[dev, "--kind", "teensy"]);
+        waiting(&a)
     };
 
     let (code, lines, err) = run(&["cal"]);
