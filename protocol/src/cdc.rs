@@ -530,8 +530,8 @@ pub const MIN_FRAME_LEN: usize = HEADER_LEN + CRC_LEN;
 /// 2. otherwise, if candidates end at `k` (each with a bad CRC), it returns `Some(Err(Error::Crc))`;
 /// 3. otherwise it returns `None`.
 ///
-/// Each candidate whose CRC is checked and fails adds one to [`Stats::crc_errors`]: every
-/// candidate ending at `k` in case 2, those starting before `s` in case 1. So no byte before a
+/// Each candidate ending at `k` with a bad CRC that starts before `s` (every one in case 2) adds
+/// one to [`Stats::crc_errors`]. So no byte before a
 /// valid frame can delay it: a valid frame is lost only if it overlaps an earlier-starting frame
 /// with a good CRC that ends no later (delivered instead), or starts inside a frame delivered before.
 ///
@@ -556,10 +556,10 @@ pub const MIN_FRAME_LEN: usize = HEADER_LEN + CRC_LEN;
 /// received is held.
 ///
 /// Work per byte, worst case: the held bytes' `MAX_FRAME_LEN − 5` = 256 possible starts compared
-/// (a length check, then `AA`, then `55`); a CRC only for each candidate that ends at this byte, at
-/// most 64 of them over 8,384 bytes in all; a walk past the bytes that can no longer start a
-/// frame; and, when the buffer is full, one move of the bytes held to its front (bytes dropped
-/// or delivered stay where they are until then). The 64 need a window crafted for it (false SOFs
+/// (`AA`, `55`, then the length); a CRC only for each candidate that ends at this byte, at most 64
+/// of them over 8,384 bytes in all; a pass over the bytes held to find the first that may still
+/// start a frame; and, when the buffer is full, one move of the bytes held to its front (bytes
+/// dropped or delivered stay where they are until then). The 64 need a window crafted for it (false SOFs
 /// about four bytes apart whose LENs all end at the same byte: two starts ending together are at
 /// least 4 bytes apart, except once 2 for LEN 0x55 and once 3 for LEN 0xAA); the test
 /// `crc_work_per_byte_is_bounded` finds the bound by trying every set of LENs and builds such a
@@ -669,32 +669,36 @@ impl StreamDecoder {
         }
     }
 
-    /// Checks the candidates that end at the last byte held, earliest start first, and stops at
-    /// the first with a good CRC. Counts each CRC failure.
+    /// Checks the candidates that end at the last byte held and picks the earliest-starting one
+    /// with a good CRC. Counts the CRC failures of the candidates that start before it (all of
+    /// them if none is good).
     fn complete(&mut self) -> Completion {
-        let mut bad_crc = false;
-        // A candidate ending at the last byte is at least MIN_FRAME_LEN bytes long.
-        let starts = self.len.saturating_add(1).saturating_sub(MIN_FRAME_LEN);
-        // From 0 rather than from `first`, skipping the dropped bytes: a position that is a
-        // plain count lets Kani's solver read each byte at a fixed place instead of at every
-        // place `first` could be.
-        for start in 0..starts {
-            if start < self.first {
-                continue;
+        // By length, shortest first: the length and the start it gives (`len − length`) are plain
+        // counts from the end, so each byte is read at a fixed place (which is what keeps Kani's
+        // formulas small), and only the bytes held are visited. A longer candidate starts earlier.
+        // The loop runs to `len` and stops at the bytes held: a bound the solver knows.
+        let span = self.len.saturating_sub(self.first);
+        let mut best = None;
+        let mut bad_before_best = 0u32;
+        for length in MIN_FRAME_LEN..=self.len.min(MAX_FRAME_LEN) {
+            if length > span {
+                break;
             }
+            let start = self.len.saturating_sub(length);
             match self.candidate_at(start) {
                 Candidate::NotHere => {}
-                Candidate::BadCrc => {
-                    self.stats.crc_errors = self.stats.crc_errors.saturating_add(1);
-                    bad_crc = true;
+                Candidate::BadCrc => bad_before_best = bad_before_best.saturating_add(1),
+                Candidate::Good(result) => {
+                    best = Some((start, result));
+                    bad_before_best = 0;
                 }
-                Candidate::Good(result) => return Completion::Frame { start, result },
             }
         }
-        if bad_crc {
-            Completion::BadCrc
-        } else {
-            Completion::Nothing
+        self.stats.crc_errors = self.stats.crc_errors.saturating_add(bad_before_best);
+        match best {
+            Some((start, result)) => Completion::Frame { start, result },
+            None if bad_before_best > 0 => Completion::BadCrc,
+            None => Completion::Nothing,
         }
     }
 
@@ -739,11 +743,18 @@ impl StreamDecoder {
     /// starts a candidate that can still end (or nothing is held).
     fn advance(&mut self) {
         let bytes = self.bytes();
-        let first = self.first;
-        // From 0, as in `complete`.
-        let live = (0..bytes.len())
-            .find(|&i| i >= first && may_start(bytes, i))
-            .unwrap_or(bytes.len());
+        let span = bytes.len().saturating_sub(self.first);
+        // From the end back to `first`, as in `complete`; the last one found is the first.
+        let mut live = bytes.len();
+        for back in 1..=bytes.len() {
+            if back > span {
+                break;
+            }
+            let i = bytes.len().saturating_sub(back);
+            if may_start(bytes, i) {
+                live = i;
+            }
+        }
         self.count_dropped(live.saturating_sub(self.first));
         self.first = live;
     }
