@@ -285,7 +285,10 @@ impl<const N: usize> CmdMsg<N> {
         if n != robust_body_len(N) {
             return Err(RejectReason::Framing);
         }
-        Self::decode_body(body.get(..robust_body_len(N)).ok_or(RejectReason::Framing)?)
+        Self::decode_body(
+            body.get(..robust_body_len(N))
+                .ok_or(RejectReason::Framing)?,
+        )
     }
 
     /// Reads a robust frame's body after COBS: length → `Framing`, CRC → `Crc`, version →
