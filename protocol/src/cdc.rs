@@ -530,8 +530,8 @@ pub const MIN_FRAME_LEN: usize = HEADER_LEN + CRC_LEN;
 /// 2. otherwise, if candidates end at `k` (each with a bad CRC), it returns `Some(Err(Error::Crc))`;
 /// 3. otherwise it returns `None`.
 ///
-/// Each candidate whose CRC is checked and fails adds one to [`Stats::crc_errors`]: every
-/// candidate ending at `k` in case 2, those starting before `s` in case 1. So no byte before a
+/// Each candidate ending at `k` with a bad CRC that starts before `s` (every one in case 2) adds
+/// one to [`Stats::crc_errors`]. So no byte before a
 /// valid frame can delay it: a valid frame is lost only if it overlaps an earlier-starting frame
 /// with a good CRC that ends no later (delivered instead), or starts inside a frame delivered before.
 ///
@@ -556,21 +556,21 @@ pub const MIN_FRAME_LEN: usize = HEADER_LEN + CRC_LEN;
 /// received is held.
 ///
 /// Work per byte, worst case: the held bytes' `MAX_FRAME_LEN − 5` = 256 possible starts compared
-/// (a length check, then `AA`, then `55`); a CRC only for each candidate that ends at this byte, at
-/// most 64 of them over 8,384 bytes in all; a walk past the bytes that can no longer start a
-/// frame (each byte is walked past once); and, when the buffer is full, one move of its bytes by
-/// one place (bytes dropped stay where they are until then). The 64 need a window crafted for it (false SOFs
+/// (`AA`, `55`, then the length); a CRC only for each candidate that ends at this byte, at most 64
+/// of them over 8,384 bytes in all; a pass over the bytes held to find the first that may still
+/// start a frame; and, when the buffer is full, one move of the bytes held to its front (bytes
+/// dropped or delivered stay where they are until then). The 64 need a window crafted for it (false SOFs
 /// about four bytes apart whose LENs all end at the same byte: two starts ending together are at
 /// least 4 bytes apart, except once 2 for LEN 0x55 and once 3 for LEN 0xAA); the test
 /// `crc_work_per_byte_is_bounded` finds the bound by trying every set of LENs and builds such a
 /// window. A stream of frames without false SOFs costs one CRC per frame, at its last byte.
 #[derive(Clone, Debug)]
 pub struct StreamDecoder {
-    /// `buf[..len]` are the bytes since the last frame delivered or since the decoder last held
-    /// nothing, at most [`MAX_FRAME_LEN`] of them; the bytes held are `buf[first..len]`, from the
-    /// oldest candidate that can still end (or a lone `AA` that may start one) to the last byte
-    /// pushed. The bytes before `first` are dropped (and counted) but not moved: bytes move only
-    /// when the buffer is full, one place. `first <= len <= MAX_FRAME_LEN` always.
+    /// `buf[..len]` are the last bytes pushed, at most [`MAX_FRAME_LEN`]; the bytes held are
+    /// `buf[first..len]`, from the oldest candidate that can still end (or a lone `AA` that may
+    /// start one) to the last byte pushed. The bytes before `first` are delivered or dropped (and
+    /// counted) but not moved: the bytes held move to the front only when the buffer is full.
+    /// `first <= len <= MAX_FRAME_LEN` always.
     buf: [u8; MAX_FRAME_LEN],
     len: usize,
     first: usize,
@@ -651,16 +651,17 @@ impl StreamDecoder {
 
     fn append(&mut self, byte: u8) {
         if self.len >= MAX_FRAME_LEN {
-            // Full: the oldest byte goes. It is a dropped one: a candidate held ends within
-            // MAX_FRAME_LEN bytes of its start, so after the byte that filled the buffer `first`
-            // is past it. Counted if it was held all the same, so that no state can make the
-            // decoder lose count.
-            self.buf.copy_within(1.., 0);
-            self.len = MAX_FRAME_LEN.saturating_sub(1);
+            // Full: the bytes held move to the front, over the dropped ones. There is at least
+            // one: a candidate held ends within MAX_FRAME_LEN bytes of its start, so after the
+            // byte that filled the buffer `first` is past its first byte. If there were none all
+            // the same, the oldest byte goes, counted, so that no state can make the decoder fail.
+            let gone = self.first.clamp(1, MAX_FRAME_LEN);
             if self.first == 0 {
                 self.count_dropped(1);
             }
-            self.first = self.first.saturating_sub(1);
+            self.buf.copy_within(gone.., 0);
+            self.len = MAX_FRAME_LEN.saturating_sub(gone);
+            self.first = self.first.saturating_sub(gone);
         }
         if let Some(slot) = self.buf.get_mut(self.len) {
             *slot = byte;
@@ -668,57 +669,69 @@ impl StreamDecoder {
         }
     }
 
-    /// Checks the candidates that end at the last byte held, earliest start first, and stops at
-    /// the first with a good CRC. Counts each CRC failure.
+    /// Checks the candidates that end at the last byte held and picks the earliest-starting one
+    /// with a good CRC. Counts the CRC failures of the candidates that start before it (all of
+    /// them if none is good).
     fn complete(&mut self) -> Completion {
-        let mut bad_crc = false;
-        // A candidate ending at the last byte is at least MIN_FRAME_LEN bytes long.
-        let starts = self.len.saturating_add(1).saturating_sub(MIN_FRAME_LEN);
-        // From 0 rather than from `first`, skipping the dropped bytes: a position that is a
-        // plain count lets Kani's solver read each byte at a fixed place instead of at every
-        // place `first` could be.
-        for start in 0..starts {
-            if start < self.first {
-                continue;
+        // By length, shortest first: the length and the start it gives (`len − length`) are plain
+        // counts from the end, so each byte is read at a fixed place (which is what keeps Kani's
+        // formulas small), and only the bytes held are visited. A longer candidate starts earlier.
+        // The loop runs to `len` and stops at the bytes held: a bound the solver knows.
+        let span = self.len.saturating_sub(self.first);
+        let mut best = None;
+        let mut bad_before_best = 0u32;
+        for length in MIN_FRAME_LEN..=self.len.min(MAX_FRAME_LEN) {
+            if length > span {
+                break;
             }
+            let start = self.len.saturating_sub(length);
             match self.candidate_at(start) {
                 Candidate::NotHere => {}
-                Candidate::BadCrc => {
-                    self.stats.crc_errors = self.stats.crc_errors.saturating_add(1);
-                    bad_crc = true;
+                Candidate::BadCrc => bad_before_best = bad_before_best.saturating_add(1),
+                Candidate::Good(result) => {
+                    best = Some((start, result));
+                    bad_before_best = 0;
                 }
-                Candidate::Good(result) => return Completion::Frame { start, result },
             }
         }
-        if bad_crc {
-            Completion::BadCrc
-        } else {
-            Completion::Nothing
+        self.stats.crc_errors = self.stats.crc_errors.saturating_add(bad_before_best);
+        match best {
+            Some((start, result)) => Completion::Frame { start, result },
+            None if bad_before_best > 0 => Completion::BadCrc,
+            None => Completion::Nothing,
         }
     }
 
     /// Whether the bytes from `buf[start]` on are a candidate (SOF, and a LEN that makes it end at
     /// the last byte), and if so what its CRC and payload say. The CRC is computed only here.
+    ///
+    /// What [`decode_frame`] does, once the SOF and the length are known to be right, with every
+    /// slice cut by the frame's own length (the number of bytes from `start` to the last one)
+    /// rather than by the LEN byte: the same bytes, but lengths Kani's solver knows.
     fn candidate_at(&self, start: usize) -> Candidate {
         let frame = self.bytes().get(start..).unwrap_or(&[]);
-        let [0xAA, 0x55, _, len, ..] = *frame else {
+        let [0xAA, 0x55, msg_id, len, ..] = *frame else {
             return Candidate::NotHere;
         };
         if frame.len() != usize::from(len).saturating_add(MIN_FRAME_LEN) {
             return Candidate::NotHere;
         }
-        match decode_frame(frame) {
-            Err(Error::Crc) => Candidate::BadCrc,
-            result => Candidate::Good(result),
+        let Some((body, stored)) = frame.split_last_chunk::<CRC_LEN>() else {
+            return Candidate::NotHere;
+        };
+        // MSG_ID, LEN and the payload; then the payload alone.
+        let covered = body.get(2..).unwrap_or(&[]);
+        if crc16::checksum(covered) != u16::from_le_bytes(*stored) {
+            return Candidate::BadCrc;
         }
+        Candidate::Good(Message::decode(msg_id, covered.get(2..).unwrap_or(&[])))
     }
 
     /// Delivers the candidate at `buf[start]`, which ends at the last byte: the bytes held before
     /// it are dropped, and every candidate that started before its end goes with it.
     fn deliver(&mut self, start: usize, result: &Result<Message, Error>) {
         self.count_dropped(start.saturating_sub(self.first));
-        self.len = 0;
-        self.first = 0;
+        self.first = self.len;
         if result.is_ok() {
             self.stats.frames = self.stats.frames.saturating_add(1);
         } else {
@@ -727,20 +740,23 @@ impl StreamDecoder {
     }
 
     /// Drops the bytes at the front that can no longer start a frame, so that the first byte held
-    /// starts a candidate that can still end (or nothing is held, and the buffer starts over).
+    /// starts a candidate that can still end (or nothing is held).
     fn advance(&mut self) {
         let bytes = self.bytes();
-        let first = self.first;
-        // From 0, as in `complete`.
-        let live = (0..bytes.len())
-            .find(|&i| i >= first && may_start(bytes, i))
-            .unwrap_or(bytes.len());
+        let span = bytes.len().saturating_sub(self.first);
+        // From the end back to `first`, as in `complete`; the last one found is the first.
+        let mut live = bytes.len();
+        for back in 1..=bytes.len() {
+            if back > span {
+                break;
+            }
+            let i = bytes.len().saturating_sub(back);
+            if may_start(bytes, i) {
+                live = i;
+            }
+        }
         self.count_dropped(live.saturating_sub(self.first));
         self.first = live;
-        if self.first >= self.len {
-            self.len = 0;
-            self.first = 0;
-        }
     }
 
     fn count_dropped(&mut self, n: usize) {

@@ -341,7 +341,7 @@ fn check_cdc_stream(stream: &[u8]) -> u32 {
 fn fuzz_cdc_stream_holds_back_no_frame() {
     static N: AtomicU64 = AtomicU64::new(0);
     static FRAMES: AtomicU64 = AtomicU64::new(0);
-    bolero::check!().with_max_len(128).for_each(|input: &[u8]| {
+    bolero::check!().with_max_len(64).for_each(|input: &[u8]| {
         N.fetch_add(1, Ordering::Relaxed);
         let delivered = check_cdc_stream(&cdc_stream(input));
         FRAMES.fetch_add(u64::from(delivered), Ordering::Relaxed);
@@ -438,7 +438,7 @@ fn check_teensy_stream(stream: &[u8]) -> u32 {
 fn fuzz_teensy_stream_holds_back_no_frame() {
     static N: AtomicU64 = AtomicU64::new(0);
     static FRAMES: AtomicU64 = AtomicU64::new(0);
-    bolero::check!().with_max_len(128).for_each(|input: &[u8]| {
+    bolero::check!().with_max_len(64).for_each(|input: &[u8]| {
         N.fetch_add(1, Ordering::Relaxed);
         let delivered = check_teensy_stream(&teensy_stream(input));
         FRAMES.fetch_add(u64::from(delivered), Ordering::Relaxed);
