@@ -204,6 +204,35 @@ pub(crate) fn check_candidate_at(src: &mut impl Source) {
     );
 }
 
+/// `may_start` from any state and any position: never panics, and says yes only for a position
+/// held whose candidate can still end after the last byte held, that is fewer than
+/// `MAX_FRAME_LEN` bytes before the end (so a full buffer's first byte held is never its first
+/// byte after `advance`). [`model::may_start`] stands in for it with exactly this.
+pub(crate) fn check_may_start(src: &mut impl Source) {
+    let mut bytes: [u8; MAX_FRAME_LEN] = src.bytes();
+    let len = usize::from(src.u16_below(MAX_FRAME_LEN as u16 + 1));
+    let mut i = usize::from(src.u16());
+    if !cfg!(kani) && len > 0 && src.bool() {
+        // A header at a position held (the twin would seldom draw one).
+        i = usize::from(src.u16()) % len;
+        let header = [0xAA, 0x55, src.u8(), src.u8()];
+        for (b, &h) in bytes[i..].iter_mut().zip(&header) {
+            *b = h;
+        }
+    }
+    let held = &bytes[..len];
+    let yes = may_start(held, i);
+    if yes {
+        check!(i < len, "only a position held may start a frame");
+        check!(
+            len - i < MAX_FRAME_LEN,
+            "a candidate that can still end started fewer than MAX_FRAME_LEN bytes ago"
+        );
+    }
+    cover!(src, yes && len - i >= 4, "a header whose frame ends later");
+    cover!(src, yes && len - i == 1, "a lone AA");
+}
+
 /// One `push` from *any* state (up to a full buffer of any bytes, any of them already dropped,
 /// any counters) never panics, never overfills, never lowers a counter; a delivered frame leaves
 /// nothing held, and otherwise fewer than `MAX_FRAME_LEN` bytes stay held (so when the next byte
@@ -281,6 +310,14 @@ pub(crate) fn check_stream_step(src: &mut impl Source) {
 #[cfg(kani)]
 pub(crate) mod model {
     use super::*;
+
+    /// [`may_start`] as `verify_may_start` proves it: any answer, but yes only for a position held
+    /// fewer than `MAX_FRAME_LEN` bytes before the end.
+    pub(crate) fn may_start(held: &[u8], i: usize) -> bool {
+        let yes: bool = kani::any();
+        kani::assume(!yes || (i < held.len() && held.len() - i < MAX_FRAME_LEN));
+        yes
+    }
 
     /// [`StreamDecoder::candidate_at`] as any verdict at all, for the step harness, whose
     /// properties hold whatever the candidates say (`verify_candidate_at` proves the real one).
@@ -577,7 +614,8 @@ fn sample_of(kind: u8) -> Message {
 /// their properties hold whatever the CRC returns, and `crc16::verify_checksum_total` proves the
 /// real one returns for every input. Round trips and bit flips use the real CRC. The stream
 /// decoder is total: `verify_stream_step` proves one `push` from any state, with `candidate_at`
-/// replaced by [`model::candidate_at`] (any verdict), which `verify_candidate_at` proves.
+/// replaced by [`model::candidate_at`] (any verdict), which `verify_candidate_at` proves, and
+/// `may_start` by [`model::may_start`], which `verify_may_start` proves.
 /// `verify_stream_holds_back_no_frame_{ping,estop}` prove the decoder's property for any 3 bytes
 /// before a PING or an ESTOP frame, with the CRC computed by the seeds' bitwise loop
 /// (`crc16::verification::seed_loop`, the same function as `checksum`, which the test
@@ -600,7 +638,8 @@ mod proofs {
         check_decode_frame_total(&mut KaniSource);
     }
 
-    /// `push`'s two scans run over up to the whole buffer: unwound to its length.
+    /// `push`'s two scans run over up to the whole buffer: unwound to its length, each position
+    /// by the proven stand-ins of `candidate_at` and `may_start`.
     #[kani::proof]
     #[kani::unwind(263)]
     #[kani::stub(
@@ -608,8 +647,15 @@ mod proofs {
         crate::crc16::verification::model::any_checksum
     )]
     #[kani::stub(StreamDecoder::candidate_at, super::model::candidate_at)]
+    #[kani::stub(crate::cdc::may_start, super::model::may_start)]
     fn verify_stream_step() {
         check_stream_step(&mut KaniSource);
+    }
+
+    #[kani::proof]
+    #[kani::unwind(8)]
+    fn verify_may_start() {
+        check_may_start(&mut KaniSource);
     }
 
     #[kani::proof]
@@ -755,6 +801,11 @@ mod twins {
     #[test]
     fn stream_step() {
         Twin::run(0xC0_0005, 50_000, check_stream_step).assert_covered(4);
+    }
+
+    #[test]
+    fn may_start() {
+        Twin::run(0xC0_0009, 50_000, check_may_start).assert_covered(2);
     }
 
     #[test]
