@@ -204,6 +204,45 @@ pub(crate) fn check_candidate_at(src: &mut impl Source) {
     );
 }
 
+/// `append` from any state (any bytes, any count held and dropped, any counters): the byte goes
+/// last; when the buffer is full the bytes held first move to its front (the oldest byte goes,
+/// counted, if none was dropped), in order; nothing else changes. [`model::append`] stands in for
+/// it with the counts alone.
+pub(crate) fn check_append(src: &mut impl Source) {
+    let mut dec = StreamDecoder::new();
+    dec.buf = src.bytes();
+    dec.len = usize::from(src.u16_below(MAX_FRAME_LEN as u16 + 1));
+    if !cfg!(kani) && src.bool() {
+        dec.len = MAX_FRAME_LEN;
+    }
+    dec.first = usize::from(src.u16_below(dec.len as u16 + 1));
+    dec.stats.dropped_bytes = src.u32();
+    let before = dec.clone();
+    let byte = src.u8();
+    dec.append(byte);
+    let full = before.len == MAX_FRAME_LEN;
+    let gone = if full { before.first.max(1) } else { 0 };
+    check!(
+        dec.len == before.len - gone + 1 && dec.first == before.first.saturating_sub(gone),
+        "append keeps the bytes held and adds one"
+    );
+    check!(dec.buf[dec.len - 1] == byte, "the byte goes last");
+    let j = usize::from(src.u16_below(MAX_FRAME_LEN as u16));
+    if j + 1 < dec.len {
+        check!(
+            dec.buf[j] == before.buf[j + gone],
+            "the bytes kept stay in order"
+        );
+    }
+    let counted = u32::from(full && before.first == 0);
+    check!(
+        dec.stats.dropped_bytes == before.stats.dropped_bytes.saturating_add(counted),
+        "a byte that leaves the buffer held is counted"
+    );
+    cover!(src, full && before.first > 1, "full buffer moved");
+    cover!(src, !full, "byte added");
+}
+
 /// `may_start` from any state and any position: never panics, and says yes only for a position
 /// held whose candidate can still end after the last byte held, that is fewer than
 /// `MAX_FRAME_LEN` bytes before the end (so a full buffer's first byte held is never its first
@@ -310,6 +349,21 @@ pub(crate) fn check_stream_step(src: &mut impl Source) {
 #[cfg(kani)]
 pub(crate) mod model {
     use super::*;
+
+    /// [`StreamDecoder::append`] as `verify_append` proves it for the counts, with any bytes:
+    /// for the step harness, whose properties do not read them.
+    pub(crate) fn append(dec: &mut StreamDecoder, _byte: u8) {
+        if dec.len >= MAX_FRAME_LEN {
+            let gone = dec.first.clamp(1, MAX_FRAME_LEN);
+            if dec.first == 0 {
+                dec.count_dropped(1);
+            }
+            dec.len = MAX_FRAME_LEN - gone;
+            dec.first = dec.first.saturating_sub(gone);
+        }
+        dec.buf = kani::any();
+        dec.len += 1;
+    }
 
     /// [`may_start`] as `verify_may_start` proves it: any answer, but yes only for a position held
     /// fewer than `MAX_FRAME_LEN` bytes before the end.
@@ -615,7 +669,8 @@ fn sample_of(kind: u8) -> Message {
 /// real one returns for every input. Round trips and bit flips use the real CRC. The stream
 /// decoder is total: `verify_stream_step` proves one `push` from any state, with `candidate_at`
 /// replaced by [`model::candidate_at`] (any verdict), which `verify_candidate_at` proves, and
-/// `may_start` by [`model::may_start`], which `verify_may_start` proves.
+/// `may_start` by [`model::may_start`], which `verify_may_start` proves, and `append` by
+/// [`model::append`], whose counts `verify_append` proves.
 /// `verify_stream_holds_back_no_frame_{ping,estop}` prove the decoder's property for any 3 bytes
 /// before a PING or an ESTOP frame, with the CRC computed by the seeds' bitwise loop
 /// (`crc16::verification::seed_loop`, the same function as `checksum`, which the test
@@ -648,8 +703,15 @@ mod proofs {
     )]
     #[kani::stub(StreamDecoder::candidate_at, super::model::candidate_at)]
     #[kani::stub(crate::cdc::may_start, super::model::may_start)]
+    #[kani::stub(StreamDecoder::append, super::model::append)]
     fn verify_stream_step() {
         check_stream_step(&mut KaniSource);
+    }
+
+    #[kani::proof]
+    #[kani::unwind(8)]
+    fn verify_append() {
+        check_append(&mut KaniSource);
     }
 
     #[kani::proof]
@@ -801,6 +863,11 @@ mod twins {
     #[test]
     fn stream_step() {
         Twin::run(0xC0_0005, 50_000, check_stream_step).assert_covered(4);
+    }
+
+    #[test]
+    fn append() {
+        Twin::run(0xC0_000A, 50_000, check_append).assert_covered(2);
     }
 
     #[test]
