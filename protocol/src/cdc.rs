@@ -541,12 +541,13 @@ pub const MIN_FRAME_LEN: usize = HEADER_LEN + CRC_LEN;
 /// `fuzz_cdc_stream_holds_back_no_frame`.
 ///
 /// ```text
-///  bytes:  13 AA 55 01 FF AA 55 03 01 01 c c  AA 55 10 00 c c
-///             └ false SOF: LEN 255 would end 261 bytes after its AA
-///                         └── ESTOP ───────┘ delivered at its last byte
-///          └── dropped ──┘                   with the false SOF's 4 bytes and the 13
-///                                           └── PING ─────────┘ delivered at its last byte
+///  bytes:  13 AA 55 01 FF AA 55 03 01 01 cc cc AA 55 10 00 cc cc
+///          └── dropped ─┘ └────── ESTOP ─────┘ └───── PING ─────┘
 /// ```
+///
+/// `AA 55 01 FF` is a false SOF: its LEN, 255, would end it 261 bytes after its `AA`. The ESTOP
+/// and the PING are each delivered at their last byte (`cc cc`: their CRC); the false SOF's
+/// bytes and the 13 are dropped when the ESTOP is delivered.
 ///
 /// # Cost
 ///

@@ -413,10 +413,13 @@ pub struct RobustStats {
 /// `fuzz_teensy_stream_holds_back_no_frame`.
 ///
 /// ```text
-///  bytes:  13 37 02 … (L − 1 bytes of a frame) … 00   02 … (the next frame) … 00
-///          └dropped┘└────────── frame ────────────┘  └─────────── frame ─────────┘
-///                                 delivered here ─┘              delivered here ─┘
+///  bytes:  13 37 02 5A … 3B 00 02 5A … 3B 00
+///          └───┘ └───────────┘ └───────────┘
+///          dropped  a frame     the next one
 /// ```
+///
+/// Each frame (`L` bytes) is delivered by the `push` of its 0x00; the non-zero bytes before it
+/// without a 0x00 between (13 37) are dropped and counted.
 ///
 /// Per byte: a non-zero byte is stored, moving the `L − 2` bytes kept when the run is longer
 /// than `L − 1`; a 0x00 decodes at most one frame (one COBS pass and one CRC over `L − 3`
