@@ -15,3 +15,6 @@ pub mod build {
 }
 
 use defmt_rtt as _;
+
+#[cfg(all(feature = "usb", feature = "qemu"))]
+compile_error!("QEMU's netduinoplus2 has no USB model: build the `usb` variant for the board only");

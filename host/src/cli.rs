@@ -1,5 +1,6 @@
 //! The frame tools behind `motorlink decode` and `motorlink encode`: every seed's frames to and from JSON
-//! (and, in [`info`], `motorlink info`: the MCU's identity from a capture or a live link).
+//! (and, in [`info`], `motorlink info`: the MCU's identity from a capture or a live link; in
+//! [`device`], the verbs that talk to a serial board).
 //!
 //! Each function returns the text to print or an error message that names the problem and the fix;
 //! none panics, whatever the input. The JSON shapes are listed in [`SHAPES`] (printed by
@@ -10,6 +11,7 @@ use protocol::{amr, cdc, pi_spi, teensy};
 use serde::{Deserialize, Serialize};
 use statemachine::{Estop, RejectReason};
 
+pub mod device;
 pub mod info;
 
 /// The frame kinds of every seed protocol.
@@ -304,6 +306,7 @@ macro_rules! with_motors {
         }
     };
 }
+pub(crate) use with_motors;
 
 /// Parses hex (whitespace, `:`, `,` and a leading `0x` allowed).
 pub fn parse_hex(s: &str) -> Result<Vec<u8>, String> {

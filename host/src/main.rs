@@ -1,4 +1,5 @@
-//! `motorlink`: run the simulator, decode/encode frames, monitor and ping a real MCU.
+//! `motorlink`: run the simulator, decode/encode frames, monitor and ping a real MCU, drive a serial
+//! board (seed 001) or arm (seed 003).
 
 use std::path::{Path, PathBuf};
 use std::process::ExitCode;
@@ -19,8 +20,9 @@ macro_rules! out {
     }};
 }
 
-use clap::{Parser, Subcommand, ValueEnum};
+use clap::{Args, Parser, Subcommand, ValueEnum};
 use motorlink::bridge::{Bridge, BridgeConfig};
+use motorlink::cli::device::{self, CdcVerb, DrivePlan, MovePlan, SendHex, TeensyVerb};
 use motorlink::cli::{self, FrameKind};
 use motorlink::link::Link;
 use motorlink::pacing::Pacer;
@@ -29,14 +31,16 @@ use motorlink::transport::{NullTransport, SerialTransport, SpiTransport, Transpo
 use motorlink::SimHost;
 use protocol::amr::{self, MotorFeedback, FRAME_LEN};
 use protocol::cdc;
+use serde_json::Value;
 use sim::report;
 use sim::scenario::{self, Scenario};
+use statemachine::Estop;
 
 #[derive(Parser)]
 #[command(
     name = "motorlink",
     version,
-    about = "Host side of the AMR motor controller: simulator, frame tools, device monitor"
+    about = "Host side of the AMR motor controller: simulator, frame tools, device monitor, serial board verbs"
 )]
 struct Cli {
     #[command(subcommand)]
@@ -52,6 +56,63 @@ enum Kind {
     /// Serial to a Teensy speaking seed 003 robust frames (COBS + CRC); monitor only listens.
     Teensy,
 }
+
+/// The serial link kinds of the board verbs.
+#[derive(Clone, Copy, PartialEq, Eq, ValueEnum)]
+enum SerialKind {
+    /// Seed 001 (`AA 55` frames): ping, enable, estop, drive, send-hex.
+    Serial,
+    /// Seed 003 robust frames: ping, move, cal, endeff, config, send-hex.
+    Teensy,
+}
+
+/// What every board verb takes.
+#[derive(Args)]
+struct SerialArgs {
+    /// Serial device: /dev/ttyACM0, /dev/ttyUSB0, or a pty such as /dev/pts/5 (QEMU -serial pty).
+    device: String,
+    /// Link kind; each verb defaults to the protocol it speaks.
+    #[arg(long, value_enum)]
+    kind: Option<SerialKind>,
+    /// Baud rate (a USB CDC device and a pty ignore it).
+    #[arg(long, default_value_t = 115_200)]
+    baud: u32,
+    /// How long to wait for each reply (ACK, echo, STATUS), ms.
+    #[arg(long, default_value_t = 500)]
+    wait_ms: u64,
+}
+
+/// `on` / `off`.
+#[derive(Clone, Copy, ValueEnum)]
+enum OnOff {
+    /// Switch on.
+    On,
+    /// Switch off.
+    Off,
+}
+
+/// ESTOP action.
+#[derive(Clone, Copy, ValueEnum)]
+enum EstopArg {
+    /// Engage and latch (the board brakes at once).
+    Engage,
+    /// Release the link's own ESTOP (the board stays braked until re-armed).
+    Release,
+}
+
+/// Output and exit status of the board verbs (also in host/README.md).
+const VERB_HELP: &str = "Output: one JSON object per line on stdout, each with t_ms (milliseconds since the verb
+started): every frame received ({\"message\":{..}}; a refused frame: {\"error\":..} or
+{\"reason\":..}), and as the last line the result, with \"verdict\": \"done\" | \"refused\" | \"no_reply\".
+
+Exit status:
+  0  done: the board answered and did it (ACK result 0, echo cmd_success 1, replies came)
+  1  refused by the board (ACK result != 0, echo cmd_success 0)
+  2  error: bad argument (nothing is sent), the device cannot be opened, an I/O error
+  3  no reply within --wait-ms
+
+The device is opened exclusively in raw mode; bytes that arrived before the open are dropped, so
+each run sees only replies to itself. Several runs in sequence on one pty (QEMU -serial pty) work.";
 
 #[derive(Subcommand)]
 enum Cmd {
@@ -103,9 +164,9 @@ enum Cmd {
         /// Link kind.
         #[arg(long, value_enum, default_value = "spi")]
         kind: Kind,
-        /// SPI clock (Hz) or baud rate.
-        #[arg(long, default_value_t = 2_000_000)]
-        speed: u32,
+        /// SPI clock, Hz (default 2000000) or baud rate (default 115200).
+        #[arg(long, visible_alias = "baud")]
+        speed: Option<u32>,
         /// How long, s.
         #[arg(long, default_value_t = 5.0)]
         seconds: f64,
@@ -113,19 +174,195 @@ enum Cmd {
         #[arg(long, default_value_t = cli::DEFAULT_MOTORS)]
         motors: usize,
     },
-    /// Exchange a few frames with a device and report round trip and clock offset.
+    /// Exchange a few frames with a device and report round trips.
+    ///
+    /// --kind spi: seed 000 command/feedback exchanges, with the MCU time and the clock offset
+    /// (text lines). --kind serial: PING, answered by a STATUS (or an ACK of PING). --kind teensy:
+    /// ENDEFF_OFF, answered by its echo (seed 003 has no probe message; switching the end effector
+    /// off is the safe, idempotent round trip, but it does switch it off). Serial kinds print JSON
+    /// lines: {"ping":i,"round_trip_us":..,"reply":{..}} or {"ping":i,"no_reply_ms":..}, then the
+    /// verdict with the round-trip statistics; exit status 3 if nothing answered.
+    #[command(after_long_help = VERB_HELP)]
     Ping {
         /// Device path.
         device: String,
         /// Link kind.
         #[arg(long, value_enum, default_value = "spi")]
         kind: Kind,
-        /// SPI clock (Hz) or baud rate.
-        #[arg(long, default_value_t = 2_000_000)]
-        speed: u32,
+        /// SPI clock, Hz (default 2000000) or baud rate (default 115200).
+        #[arg(long, visible_alias = "baud")]
+        speed: Option<u32>,
         /// Exchanges.
         #[arg(long, default_value_t = 10)]
         count: u32,
+        /// How long to wait for each reply, ms (serial kinds).
+        #[arg(long, default_value_t = 200)]
+        wait_ms: u64,
+        /// Motors in a seed 003 CmdMsg (--kind teensy).
+        #[arg(long, default_value_t = cli::DEFAULT_MOTORS)]
+        motors: usize,
+    },
+    /// Seed 001: MOTOR_ENABLE on|off, wait for its ACK (exit 1 if the board refuses it).
+    ///
+    /// `on` asks the board to leave BRAKE; it does so only when fresh SET_MOTOR_PWM frames follow
+    /// before its comm-loss threshold, so to drive use `drive --enable`, which sends both. The
+    /// board refuses `on` (ACK result 1) while an ESTOP or another latching cause is active. Last
+    /// line: {"verdict":..,"sent":{..},"reply":{"type":"ack","msg_id":2,"result":0},"round_trip_us":..}.
+    #[command(after_long_help = VERB_HELP)]
+    Enable {
+        /// on: re-arm (MOTOR_ENABLE 1); off: stop (MOTOR_ENABLE 0).
+        #[arg(value_enum)]
+        state: OnOff,
+        #[command(flatten)]
+        link: SerialArgs,
+    },
+    /// Seed 001: ESTOP engage|release, wait for its ACK.
+    ///
+    /// engage latches BRAKE at once. release clears this link's ESTOP; the board stays braked
+    /// until re-armed (`drive --enable`). Last line as for `enable` (msg_id 3).
+    #[command(after_long_help = VERB_HELP)]
+    Estop {
+        /// engage or release.
+        #[arg(value_enum)]
+        action: EstopArg,
+        #[command(flatten)]
+        link: SerialArgs,
+    },
+    /// Seed 001: send SET_MOTOR_PWM at a fixed rate for a while, then stop sending.
+    ///
+    /// Frames go out on absolute deadlines (--hz; the first at once) for --seconds; every STATUS,
+    /// IMU and ACK received is printed. Then nothing more is sent: the board brakes on its own
+    /// within --timeout-ms. The arguments are checked before the device is opened: |pwm| <= 1000,
+    /// timeout from one frame period to 65535 ms, 0 < hz <= 1000.
+    ///
+    /// --enable: MOTOR_ENABLE 1 right after the first frame, its ACK awaited while the frames keep
+    /// coming (the board keeps a re-arm only until the first frame, at most 249 ms); refused: stop sending, exit 1;
+    /// no ACK within --wait-ms: stop sending, exit 3.
+    ///
+    /// First line {"sending":{..},"frames":..,"hz":..,"enable":..}; last line {"verdict":..,
+    /// "frames_sent":..,"enable":{"reply":..,"round_trip_us":..}|null,"received":{"status":..,
+    /// "status_motor_enabled":..,"status_estop_latched":..,"imu":..,"ack":..,"other":..,"errors":..,
+    /// "last_status":{..}},"decoder":{..},"pacing":{..},"stopped_early":..}. Exit 3 also if a drive
+    /// of 0.2 s or more received no valid frame at all (the board sends STATUS every 100 ms).
+    #[command(after_long_help = VERB_HELP)]
+    Drive {
+        #[command(flatten)]
+        link: SerialArgs,
+        /// Duties of motors 1 to 4, -1000 ..= 1000 (full scale), e.g. --pwm 300,-300,0,0.
+        #[arg(long, allow_hyphen_values = true)]
+        pwm: String,
+        /// The frame's timeout_ms: the board brakes if no new frame comes within it.
+        #[arg(long, default_value_t = 200)]
+        timeout_ms: u32,
+        /// Frames per second.
+        #[arg(long, default_value_t = 50.0)]
+        hz: f64,
+        /// How long to send, s.
+        #[arg(long, default_value_t = 1.0)]
+        seconds: f64,
+        /// Re-arm first (MOTOR_ENABLE 1 after the first frame; its ACK is checked).
+        #[arg(long)]
+        enable: bool,
+    },
+    /// Seed 003: MTRS to absolute angles at a fixed rate (or once), checking every echo.
+    ///
+    /// Every echo must come back with cmd_success 1: a refusal stops the sending at once (exit 1),
+    /// an echo missing --wait-ms after its command stops it too (exit 3). cmd_success 1 means the
+    /// board took the command; the arm moves only once re-armed (--cal, or an earlier `cal` with
+    /// MTRS frames kept fresh) and only while frames keep coming (it holds, then brakes, within
+    /// 250 ms of the last).
+    ///
+    /// --cal: CAL right after the first MTRS, its echo checked while moving. --once: one MTRS (with
+    /// --cal: one before the CAL and one after it). --relative sends is_relative 1 (this board
+    /// refuses relative moves: exit 1).
+    ///
+    /// Last line {"verdict":..,"mtrs_sent":..,"echoes_ok":..,"echoes_refused":..,
+    /// "echoes_missing":..,"cal":{"reply":..,"round_trip_us":..}|null,"received":{..},
+    /// "decoder":{..},"pacing":{..},"stopped_early":..}.
+    #[command(after_long_help = VERB_HELP)]
+    Move {
+        #[command(flatten)]
+        link: SerialArgs,
+        /// One absolute angle per joint, degrees, e.g. --angles 10,-20,0,45.
+        #[arg(long, allow_hyphen_values = true)]
+        angles: String,
+        /// Speed cap, deg/s.
+        #[arg(long)]
+        speed: i32,
+        /// Re-arm first (CAL after the first MTRS).
+        #[arg(long)]
+        cal: bool,
+        /// Send one MTRS instead of repeating.
+        #[arg(long)]
+        once: bool,
+        /// Relative angles (is_relative 1).
+        #[arg(long)]
+        relative: bool,
+        /// Frames per second.
+        #[arg(long, default_value_t = 50.0)]
+        hz: f64,
+        /// How long to send, s.
+        #[arg(long, default_value_t = 1.0)]
+        seconds: f64,
+        /// Joints of the arm (MAX_SUPPORTED_MTRS), 1 to 16.
+        #[arg(long, default_value_t = cli::DEFAULT_MOTORS)]
+        motors: usize,
+    },
+    /// Seed 003: CAL, the explicit re-arm; wait for its echo.
+    ///
+    /// The arm leaves BRAKE only when fresh MTRS frames follow before its comm-loss threshold: to
+    /// move, use `move --cal`. Last line {"verdict":..,"sent":{..},"reply":{..},"round_trip_us":..}.
+    #[command(after_long_help = VERB_HELP)]
+    Cal {
+        #[command(flatten)]
+        link: SerialArgs,
+        /// Joints of the arm, 1 to 16.
+        #[arg(long, default_value_t = cli::DEFAULT_MOTORS)]
+        motors: usize,
+    },
+    /// Seed 003: ENDEFF_ON / ENDEFF_OFF, wait for the echo.
+    #[command(after_long_help = VERB_HELP)]
+    Endeff {
+        /// on or off.
+        #[arg(value_enum)]
+        state: OnOff,
+        #[command(flatten)]
+        link: SerialArgs,
+        /// Joints of the arm, 1 to 16.
+        #[arg(long, default_value_t = cli::DEFAULT_MOTORS)]
+        motors: usize,
+    },
+    /// Seed 003: CONFIG, the joints' acceleration; wait for the echo (refused above the board's limit).
+    #[command(after_long_help = VERB_HELP)]
+    Config {
+        #[command(flatten)]
+        link: SerialArgs,
+        /// Acceleration, deg/s^2 (mtr_accel_deg_s_s).
+        #[arg(long, allow_hyphen_values = true)]
+        accel: i32,
+        /// Joints of the arm, 1 to 16.
+        #[arg(long, default_value_t = cli::DEFAULT_MOTORS)]
+        motors: usize,
+    },
+    /// Write raw bytes (hex) to a serial board, then print whatever arrives within --listen-ms.
+    ///
+    /// For fault injection: a corrupted frame, a truncated one, garbage. The bytes go out exactly
+    /// as given; replies are decoded as --kind (default serial). First line {"sent_hex":..,
+    /// "bytes":..}; last line {"verdict":"done","received":{..},"decoder":{..}}: always exit 0
+    /// unless the device fails. Build frames with `motorlink encode`.
+    #[command(after_long_help = VERB_HELP)]
+    SendHex {
+        #[command(flatten)]
+        link: SerialArgs,
+        /// The bytes in hex (spaces, ':' and ',' allowed), e.g. aa55030100fda7 (an ESTOP release
+        /// whose CRC is broken; the valid one is aa55030100fda6).
+        hex: String,
+        /// How long to listen after the write, ms.
+        #[arg(long, default_value_t = 300)]
+        listen_ms: u64,
+        /// Motors in a seed 003 CmdMsg (--kind teensy), 1 to 16.
+        #[arg(long, default_value_t = cli::DEFAULT_MOTORS)]
+        motors: usize,
     },
     /// Print the MCU's firmware identity and reset cause (seed 000 McuInfo), from a capture or live.
     ///
@@ -325,31 +562,6 @@ fn monitor_teensy<const N: usize>(device: &str, baud: u32, seconds: f64) -> Resu
     Ok(())
 }
 
-fn ping_cdc(device: &str, baud: u32, count: u32) -> Result<(), String> {
-    let mut link = CdcLink::new(open_serial(device, baud)?);
-    let mut ok = 0u32;
-    for i in 0..count {
-        match link.ping(Duration::from_millis(200)) {
-            Ok(r) => {
-                ok = ok.saturating_add(1);
-                out!(
-                    "{i}: {} us, reply {}",
-                    r.round_trip.as_micros(),
-                    serde_json::json!(cli::CdcJson::from(r.reply))
-                );
-            }
-            Err(e) => out!("{i}: {e}"),
-        }
-    }
-    eprintln!("{}", serde_json::json!({"stats": link.stats()}));
-    if ok == 0 {
-        return Err(format!(
-            "no ACK or STATUS from {device} in {count} PINGs: check the baud rate and that the firmware speaks seed 001"
-        ));
-    }
-    Ok(())
-}
-
 struct Boxed(Box<dyn Transport>);
 impl Transport for Boxed {
     fn exchange(&mut self, tx: &[u8], rx: &mut [u8]) -> Result<(), motorlink::LinkError> {
@@ -360,13 +572,22 @@ impl Transport for Boxed {
     }
 }
 
+/// The default `--speed` of a link kind: SPI 2 MHz, serial 115200 baud.
+fn default_speed(kind: Kind) -> u32 {
+    match kind {
+        Kind::Spi => 2_000_000,
+        Kind::Serial | Kind::Teensy => 115_200,
+    }
+}
+
 fn monitor(
     device: &str,
     kind: Kind,
-    speed: u32,
+    speed: Option<u32>,
     seconds: f64,
     motors: usize,
 ) -> Result<(), String> {
+    let speed = speed.unwrap_or(default_speed(kind));
     match kind {
         Kind::Spi => {}
         Kind::Serial => return monitor_cdc(device, speed, seconds),
@@ -412,14 +633,31 @@ fn monitor(
     Ok(())
 }
 
-fn ping(device: &str, kind: Kind, speed: u32, count: u32) -> Result<(), String> {
-    match kind {
+/// What `ping` was asked.
+struct PingArgs<'a> {
+    device: &'a str,
+    kind: Kind,
+    speed: Option<u32>,
+    count: u32,
+    wait: Duration,
+    motors: usize,
+}
+
+fn ping(a: &PingArgs<'_>) -> Result<u8, String> {
+    let (device, count) = (a.device, a.count);
+    let speed = a.speed.unwrap_or(default_speed(a.kind));
+    match a.kind {
         Kind::Spi => {}
-        Kind::Serial => return ping_cdc(device, speed, count),
+        Kind::Serial => {
+            let port = open_serial(device, speed)?;
+            let v = device::run_cdc(port, &CdcVerb::Ping { count }, a.wait, &mut print_line)?;
+            return Ok(v.exit_code());
+        }
         Kind::Teensy => {
-            return Err(
-                "ping speaks seed 001 (--kind serial) or seed 000 (--kind spi); a Teensy has no probe message: use monitor --kind teensy".into(),
-            )
+            let port = open_serial(device, speed)?;
+            let verb = TeensyVerb::Ping { count };
+            let v = device::run_teensy(port, a.motors, &verb, a.wait, &mut print_line)?;
+            return Ok(v.exit_code());
         }
     }
     let t = open_spi(device, speed)?;
@@ -452,7 +690,129 @@ fn ping(device: &str, kind: Kind, speed: u32, count: u32) -> Result<(), String> 
             "no valid reply from {device} in {count} exchanges: check wiring, SPI mode 0, and that the firmware runs"
         ));
     }
-    Ok(())
+    Ok(0)
+}
+
+/// Prints one JSON line of a board verb.
+fn print_line(v: Value) {
+    out!("{v}");
+}
+
+/// Checks that a verb's `--kind` is the protocol it speaks.
+fn expect_kind(kind: Option<SerialKind>, want: SerialKind, instead: &str) -> Result<(), String> {
+    match kind {
+        Some(k) if k != want => Err(instead.to_string()),
+        _ => Ok(()),
+    }
+}
+
+/// Opens the device of a board verb and runs a seed 001 verb on it.
+fn cdc_verb(link: &SerialArgs, verb: &CdcVerb) -> Result<u8, String> {
+    let port = open_serial(&link.device, link.baud)?;
+    let wait = Duration::from_millis(link.wait_ms);
+    Ok(device::run_cdc(port, verb, wait, &mut print_line)?.exit_code())
+}
+
+/// Opens the device of a board verb and runs a seed 003 verb on it.
+fn teensy_verb(link: &SerialArgs, motors: usize, verb: &TeensyVerb) -> Result<u8, String> {
+    let port = open_serial(&link.device, link.baud)?;
+    let wait = Duration::from_millis(link.wait_ms);
+    Ok(device::run_teensy(port, motors, verb, wait, &mut print_line)?.exit_code())
+}
+
+const NOT_TEENSY: &str =
+    "this verb speaks seed 001 (--kind serial); for a seed 003 arm use move, cal, endeff, config";
+const NOT_SERIAL: &str =
+    "this verb speaks seed 003 (--kind teensy); for a seed 001 board use enable, estop, drive";
+
+/// Runs one of the board verbs (everything but sim, decode, encode, monitor, ping, info, loop-bench).
+fn board_verb(cmd: Cmd) -> Result<u8, String> {
+    let on = |s: OnOff| matches!(s, OnOff::On);
+    match cmd {
+        Cmd::Enable { state, link } => {
+            expect_kind(link.kind, SerialKind::Serial, NOT_TEENSY)?;
+            cdc_verb(&link, &CdcVerb::Enable(on(state)))
+        }
+        Cmd::Estop { action, link } => {
+            expect_kind(link.kind, SerialKind::Serial, NOT_TEENSY)?;
+            let a = match action {
+                EstopArg::Engage => Estop::Engage,
+                EstopArg::Release => Estop::Release,
+            };
+            cdc_verb(&link, &CdcVerb::Estop(a))
+        }
+        Cmd::Drive {
+            link,
+            pwm,
+            timeout_ms,
+            hz,
+            seconds,
+            enable,
+        } => {
+            expect_kind(link.kind, SerialKind::Serial, NOT_TEENSY)?;
+            let pwm = device::parse_list(&pwm, "--pwm")?;
+            let plan = DrivePlan::new(&pwm, timeout_ms, hz, seconds, enable)?;
+            cdc_verb(&link, &CdcVerb::Drive(plan))
+        }
+        Cmd::Move {
+            link,
+            angles,
+            speed,
+            cal,
+            once,
+            relative,
+            hz,
+            seconds,
+            motors,
+        } => {
+            expect_kind(link.kind, SerialKind::Teensy, NOT_SERIAL)?;
+            let angles = device::parse_list(&angles, "--angles")?;
+            let plan = MovePlan::new(&angles, motors, speed, relative, hz, seconds, once, cal)?;
+            teensy_verb(&link, motors, &TeensyVerb::Move(plan))
+        }
+        Cmd::Cal { link, motors } => {
+            expect_kind(link.kind, SerialKind::Teensy, NOT_SERIAL)?;
+            teensy_verb(&link, motors, &TeensyVerb::Cal)
+        }
+        Cmd::Endeff {
+            state,
+            link,
+            motors,
+        } => {
+            expect_kind(link.kind, SerialKind::Teensy, NOT_SERIAL)?;
+            teensy_verb(&link, motors, &TeensyVerb::Endeff(on(state)))
+        }
+        Cmd::Config {
+            link,
+            accel,
+            motors,
+        } => {
+            expect_kind(link.kind, SerialKind::Teensy, NOT_SERIAL)?;
+            teensy_verb(
+                &link,
+                motors,
+                &TeensyVerb::Config {
+                    accel_deg_s2: accel,
+                },
+            )
+        }
+        Cmd::SendHex {
+            link,
+            hex,
+            listen_ms,
+            motors,
+        } => {
+            let h = SendHex {
+                bytes: cli::parse_hex(&hex)?,
+                listen: Duration::from_millis(listen_ms),
+            };
+            match link.kind.unwrap_or(SerialKind::Serial) {
+                SerialKind::Serial => cdc_verb(&link, &CdcVerb::SendHex(h)),
+                SerialKind::Teensy => teensy_verb(&link, motors, &TeensyVerb::SendHex(h)),
+            }
+        }
+        _ => Err("internal: not a board verb".into()),
+    }
 }
 
 fn info(
@@ -511,7 +871,7 @@ fn loop_bench(seconds: f64) -> Result<(), String> {
 
 fn main() -> ExitCode {
     let cli = Cli::parse();
-    let r = match cli.cmd {
+    let r: Result<u8, String> = match cli.cmd {
         Cmd::Sim {
             scenarios,
             out,
@@ -526,14 +886,19 @@ fn main() -> ExitCode {
                         .unwrap_or_default();
                     out!("{n:20} {d}");
                 }
-                Ok(true)
+                Ok(0)
             } else {
-                run_sim(&scenarios, &out, duration, !no_plots)
+                run_sim(&scenarios, &out, duration, !no_plots).map(|ok| {
+                    if !ok {
+                        eprintln!("some scenario expectations failed (see FAIL lines above)");
+                    }
+                    u8::from(!ok)
+                })
             }
         }
         Cmd::Decode { frame, hex, motors } => cli::decode(frame, &hex, motors).map(|s| {
             out!("{s}");
-            true
+            0
         }),
         Cmd::Encode {
             frame,
@@ -541,7 +906,7 @@ fn main() -> ExitCode {
             motors,
         } => cli::encode(frame, &json, motors).map(|s| {
             out!("{s}");
-            true
+            0
         }),
         Cmd::Monitor {
             device,
@@ -549,13 +914,22 @@ fn main() -> ExitCode {
             speed,
             seconds,
             motors,
-        } => monitor(&device, kind, speed, seconds, motors).map(|()| true),
+        } => monitor(&device, kind, speed, seconds, motors).map(|()| 0),
         Cmd::Ping {
             device,
             kind,
             speed,
             count,
-        } => ping(&device, kind, speed, count).map(|()| true),
+            wait_ms,
+            motors,
+        } => ping(&PingArgs {
+            device: &device,
+            kind,
+            speed,
+            count,
+            wait: Duration::from_millis(wait_ms),
+            motors,
+        }),
         Cmd::Info {
             capture,
             device,
@@ -569,18 +943,15 @@ fn main() -> ExitCode {
             timeout_ms,
             json,
         )
-        .map(|()| true),
-        Cmd::LoopBench { seconds } => loop_bench(seconds).map(|()| true),
+        .map(|()| 0),
+        Cmd::LoopBench { seconds } => loop_bench(seconds).map(|()| 0),
+        verb => board_verb(verb),
     };
     match r {
-        Ok(true) => ExitCode::SUCCESS,
-        Ok(false) => {
-            eprintln!("some scenario expectations failed (see FAIL lines above)");
-            ExitCode::FAILURE
-        }
+        Ok(code) => ExitCode::from(code),
         Err(e) => {
             eprintln!("error: {e}");
-            ExitCode::from(2)
+            ExitCode::from(device::EXIT_ERROR)
         }
     }
 }

@@ -23,9 +23,9 @@ impl core::fmt::Display for LinkError {
         match self {
             Self::Open(dev, e) => write!(
                 f,
-                "cannot open {dev}: {e}. Check that the device exists (ls /dev/spidev* /dev/ttyACM*), that SPI is enabled in the device tree, and that you are in the group owning it (spi or dialout)"
+                "cannot open {dev}: {e}. Check that the device exists (ls /dev/spidev* /dev/ttyACM* /dev/pts/), that no other program holds it open, that SPI is enabled in the device tree, and that you are in the group owning it (spi or dialout)"
             ),
-            Self::Configure(dev, e) => write!(f, "cannot configure {dev}: {e}. Check that the driver supports mode 0, 8 bits, 2 MHz"),
+            Self::Configure(dev, e) => write!(f, "cannot configure {dev}: {e}. Check that the driver supports the settings (SPI: mode 0, 8 bits, 2 MHz; serial: raw 8N1 at the baud rate)"),
             Self::Io(dev, e) => write!(f, "transfer on {dev} failed: {e}. Check the cable and that the MCU is powered"),
             Self::NoReply(dev, what) => write!(f, "{dev}: no {what} before the timeout. Check that the firmware runs, the baud rate, and that the device speaks this protocol"),
             Self::Timeout(dev, n) => write!(f, "{dev}: only {n} bytes came back before the timeout. Check that the MCU firmware is running and the baud rate / wiring"),
@@ -81,7 +81,8 @@ impl Transport for SpiTransport {
     }
 }
 
-/// A serial port or USB CDC ACM device (`/dev/ttyACM0`), raw 8N1.
+/// A serial port, USB CDC ACM device (`/dev/ttyACM0`) or pseudo-terminal (`/dev/pts/5`, as QEMU's
+/// `-serial pty` creates), raw 8N1.
 pub struct SerialTransport {
     port: Box<dyn serialport::SerialPort>,
     path: String,
@@ -89,11 +90,24 @@ pub struct SerialTransport {
 
 impl SerialTransport {
     /// Opens `path` at `baud` with a read timeout.
+    ///
+    /// The line is put in raw mode (`cfmakeraw`: no echo, no line editing, no signal characters,
+    /// no CR/LF translation, no software flow control), so every byte passes unchanged both ways;
+    /// a pty starts in cooked mode with echo on, which would send the MCU's own frames back to it.
+    /// The port is opened exclusively (`TIOCEXCL` and `flock`): a second `motorlink` on the same
+    /// device is refused instead of interleaving its frames. DTR is left as the kernel sets it (no
+    /// modem-control call, which a pty would refuse anyway).
+    ///
+    /// Bytes that arrived before the open (a pty buffers the MCU's STATUS frames while no process
+    /// holds it) are discarded, so the first message read after a request is no stale reply to
+    /// somebody else's. Nothing written after the open is lost: the flush happens before it.
     pub fn open(path: &str, baud: u32, timeout: Duration) -> Result<Self, LinkError> {
         let port = serialport::new(path, baud)
             .timeout(timeout)
             .open()
             .map_err(|e| LinkError::Open(path.into(), e.to_string()))?;
+        port.clear(serialport::ClearBuffer::Input)
+            .map_err(|e| LinkError::Configure(path.into(), e.to_string()))?;
         Ok(Self {
             port,
             path: path.into(),
@@ -136,6 +150,10 @@ pub trait ByteStream {
     fn read_some(&mut self, buf: &mut [u8]) -> Result<usize, LinkError>;
     /// The device name, for messages.
     fn name(&self) -> &str;
+    /// Sets how long [`ByteStream::read_some`] waits; streams without a clock ignore it.
+    fn set_read_timeout(&mut self, _timeout: Duration) -> Result<(), LinkError> {
+        Ok(())
+    }
 }
 
 impl ByteStream for SerialTransport {
@@ -155,6 +173,12 @@ impl ByteStream for SerialTransport {
 
     fn name(&self) -> &str {
         &self.path
+    }
+
+    fn set_read_timeout(&mut self, timeout: Duration) -> Result<(), LinkError> {
+        self.port
+            .set_timeout(timeout)
+            .map_err(|e| LinkError::Configure(self.path.clone(), e.to_string()))
     }
 }
 
@@ -226,3 +250,6 @@ impl Transport for NullTransport {
         "null"
     }
 }
+
+#[cfg(test)]
+mod tests;

@@ -4,6 +4,7 @@
 //! ```text
 //!  task (priority, rate)          body                          what it does
 //!  link_rx       (2, per byte)    CdcLinkTask::on_byte          byte → frame → ladder event → ACK / STATUS queued
+//!                                 outputs_after_frame           a frame that braked: every motor shorted at once
 //!  watchdog_tick (2, 1 kHz)       serial::tick, motor_outputs   ESTOP, supply → tick → CCR and IN1/IN2 per motor
 //!                                 CdcLinkTask::periodic         STATUS every STATUS_PERIOD_TICKS
 //!  imu_read      (1, 100 Hz)      imu_from_raw, send_imu        MPU6050 registers → IMU_MPU6050 frame
@@ -20,6 +21,10 @@
 //! | `ESTOP 0`       | `Estop(Primary, Release)`: releases the link's own ESTOP; the drive stays braked until `MOTOR_ENABLE 1` | `ACK(0x03, 0)`, or `(0x03, 1)` if refused |
 //! | `PING`          | none                                                   | a `STATUS` at once        |
 //! | a refused frame, or a message only the MCU sends | `Rejected(reason)` (counted; nothing else changes) | reported in the next STATUS `err` |
+//!
+//! The seed's `MOTOR_ENABLE`: "0 = disabled (outputs forced to 0), 1 = enabled (lets
+//! `SET_MOTOR_PWM` take effect)". The disable therefore lasts until the next `MOTOR_ENABLE 1`,
+//! not until the next 50 Hz frame. Power-on counts as disabled; the drive is braked then anyway.
 //!
 //! Why `MOTOR_ENABLE 1` carries a coasting frame: the ladder leaves BRAKE at a tick after the
 //! re-arm only with a valid enabled frame since the previous tick, and while no frame arrives its
@@ -82,6 +87,7 @@ pub struct CdcLinkTask {
     pub tx: TxQueue<TX_CAP>,
     last_error: Option<ErrorCode>,
     status_due: u32,
+    /// The host's last `MOTOR_ENABLE` (false from power-on until the first `MOTOR_ENABLE 1`).
     enabled: bool,
 }
 
@@ -106,6 +112,11 @@ impl CdcLinkTask {
     /// The stream decoder's counters.
     pub const fn stats(&self) -> cdc::Stats {
         self.dec.stats()
+    }
+
+    /// True between a `MOTOR_ENABLE 1` and the next `MOTOR_ENABLE 0`: `SET_MOTOR_PWM` drives.
+    pub const fn motors_enabled(&self) -> bool {
+        self.enabled
     }
 
     /// One received byte (the body of `link_rx`). Returns the ladder's output if the byte
@@ -324,6 +335,13 @@ pub fn motor_outputs(drive: &Drive<MOTORS>, arr: u16) -> [MotorOutput; MOTORS] {
             }
         }),
     }
+}
+
+/// What `link_rx` writes to the motors after a frame reached the ladder: every motor shorted if
+/// the frame braked it (an `ESTOP 1`: "电机立刻 0", the motors at once, not at the next tick),
+/// nothing otherwise (a frame never moves the drive; the tick applies the rest).
+pub fn outputs_after_frame(out: &Output<MOTORS>, arr: u16) -> Option<[MotorOutput; MOTORS]> {
+    matches!(out.drive, Drive::Brake).then_some([MotorOutput::short(arr); MOTORS])
 }
 
 /// Full-scale settings of the MPU6050 as the board programs them.

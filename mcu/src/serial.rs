@@ -51,6 +51,19 @@ impl<const CAP: usize> TxQueue<CAP> {
         true
     }
 
+    /// Puts `bytes` back at the front, in order: for a transmitter that took fewer of the bytes
+    /// just popped than it was offered. Returns false (and puts back nothing) if they do not fit.
+    pub fn push_front_all(&mut self, bytes: &[u8]) -> bool {
+        if bytes.len() > CAP.saturating_sub(self.q.len()) {
+            return false;
+        }
+        for &b in bytes.iter().rev() {
+            // Cannot fail: the room was checked above.
+            let _ = self.q.push_front(b);
+        }
+        true
+    }
+
     /// The next byte to send.
     pub fn pop(&mut self) -> Option<u8> {
         self.q.pop_front()
@@ -114,6 +127,12 @@ mod tests {
         );
         assert_eq!(q.dropped(), 1);
         assert!(q.push_frame(&[6, 7, 8]));
+        let (a, b) = (q.pop(), q.pop());
+        assert!(
+            q.push_front_all(&[1, 2]),
+            "the two bytes a transmitter did not take"
+        );
+        assert_eq!((a, b), (Some(1), Some(2)));
         let out: std::vec::Vec<u8> = core::iter::from_fn(|| q.pop()).collect();
         assert_eq!(out, [1, 2, 3, 4, 5, 6, 7, 8]);
         assert!(q.is_empty());

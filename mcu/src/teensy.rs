@@ -225,6 +225,43 @@ impl Joints {
     pub fn step_targets(&self) -> [i32; JOINTS] {
         self.positions().map(steps_of)
     }
+
+    /// Every joint at rest where its motor stands (`steps`): after a halt, the references restart
+    /// from the motors, not from where the profile had already got to.
+    pub fn hold_at(&mut self, steps: [i32; JOINTS]) {
+        for (p, s) in self.prof.iter_mut().zip(steps) {
+            *p = Trapezoid::new(rad_of(s), &self.lim.travel);
+        }
+    }
+}
+
+/// The tick's drive stage of the arm (the body the firmware's tick and the simulator run): the
+/// joints' profiles one tick on under the ladder's drive, then the step generator either follows
+/// them or, in BRAKE or with an ESTOP press not yet latched, halts where the motors stand, and the
+/// profiles are put there too. Returns the step targets in force.
+pub fn drive_joints(
+    joints: &mut Joints,
+    gen: &mut StepGen,
+    drive: &Drive<JOINTS>,
+    estop_pending: bool,
+) -> [i32; JOINTS] {
+    joints.tick(drive);
+    if matches!(drive, Drive::Brake) || estop_pending {
+        gen.halt();
+        joints.hold_at(gen.position());
+        gen.position()
+    } else {
+        let t = joints.step_targets();
+        gen.set_target(t);
+        t
+    }
+}
+
+/// A step count as a position, rad.
+pub fn rad_of(steps: i32) -> Position {
+    Position::from_num(steps)
+        .checked_div(STEPS_PER_RAD)
+        .unwrap_or(Position::ZERO)
 }
 
 /// A position in steps, rounded to the nearest (|rad| ≤ π within the travel: no overflow).

@@ -500,31 +500,81 @@ pub fn decode_frame(bytes: &[u8]) -> Result<Message, Error> {
 pub struct Stats {
     /// Frames delivered as messages.
     pub frames: u32,
-    /// Frames whose CRC failed.
+    /// Candidate frames whose CRC failed (each candidate checked, see [`StreamDecoder`]).
     pub crc_errors: u32,
     /// Frames with a good CRC but a bad payload (length, unknown MSG_ID, value).
     pub message_errors: u32,
-    /// Bytes discarded while hunting for a start of frame (garbage, remains of broken frames, reset).
+    /// Bytes discarded: every byte that is not part of a delivered frame (garbage, false starts,
+    /// remains of broken frames, a reset), counted when the decoder lets go of it.
     pub dropped_bytes: u32,
 }
 
-/// Turns a byte stream into messages; resynchronises after garbage, a false SOF inside a payload,
-/// a truncated frame or a bad CRC.
+/// Shortest frame: SOF, MSG_ID, LEN and CRC, no payload.
+pub const MIN_FRAME_LEN: usize = HEADER_LEN + CRC_LEN;
+
+/// Turns a byte stream into messages: every complete frame with a good CRC is delivered at its
+/// last byte, whatever came before it (garbage, a false SOF, that is an `AA 55` in garbage or in a
+/// payload, announcing a LEN that reaches past the frames after it, a truncated frame, a bad CRC).
 ///
-/// Bounded memory: one frame ([`MAX_FRAME_LEN`] bytes). On a CRC failure only the first SOF byte
-/// is discarded and the rest is scanned again, so a real frame that began inside the broken one
-/// (after a truncation or a false SOF) is still found. A frame whose CRC is good is consumed whole,
-/// even if its payload is refused.
+/// # Property
+///
+/// Write the stream `b[0] b[1] …` and let the boundary `B` be the position just after the last
+/// frame delivered (0 at the start; after [`reset`](Self::reset), the position of the next byte).
+/// A *candidate ending at `k`* is `b[s..=k]` with `s ≥ B`, `b[s] b[s+1]` = `AA 55` and
+/// `k − s + 1 = 6 + b[s+3]` (its LEN). After `push(b[k])`:
+///
+/// 1. if a candidate ending at `k` has a good CRC, `push` returns `Some(decode_frame(b[s..=k]))`
+///    for the earliest-starting such `s`: `Ok(message)`, or [`Error::Length`],
+///    [`Error::UnknownMsg`] or [`Error::Value`] for a frame whose payload is refused. That frame is
+///    delivered: `B` becomes `k + 1`, and the `s − B` bytes before it are counted as dropped;
+/// 2. otherwise, if candidates end at `k` (each with a bad CRC), it returns `Some(Err(Error::Crc))`;
+/// 3. otherwise it returns `None`.
+///
+/// Each candidate ending at `k` with a bad CRC that starts before `s` (every one in case 2) adds
+/// one to [`Stats::crc_errors`]. So no byte before a
+/// valid frame can delay it: a valid frame is lost only if it overlaps an earlier-starting frame
+/// with a good CRC that ends no later (delivered instead), or starts inside a frame delivered before.
+///
+/// The property is checked, against a naive reference that tries every start position at every
+/// byte, by the exhaustive test `stream_holds_back_no_frame_exhaustively`, the Kani harnesses
+/// `verify_stream_holds_back_no_frame_*` with their twin, and the fuzz target
+/// `fuzz_cdc_stream_holds_back_no_frame`.
 ///
 /// ```text
-///  bytes:  .. 13 AA 55 01 0A [10 B] c c | AA 55 02 01 01 c c ..
-///          └dropped┘└──── frame ───────┘ └───── frame ─────┘
+///  bytes:  13 AA 55 01 FF AA 55 03 01 01 cc cc AA 55 10 00 cc cc
+///          └── dropped ─┘ └────── ESTOP ─────┘ └───── PING ─────┘
 /// ```
+///
+/// `AA 55 01 FF` is a false SOF: its LEN, 255, would end it 261 bytes after its `AA`. The ESTOP
+/// and the PING are each delivered at their last byte (`cc cc`: their CRC); the false SOF's
+/// bytes and the 13 are dropped when the ESTOP is delivered.
+///
+/// # Cost
+///
+/// Memory: one frame ([`MAX_FRAME_LEN`] bytes). The decoder holds the bytes from the oldest
+/// candidate that can still end to the last byte: a candidate ends at most `MAX_FRAME_LEN − 1`
+/// bytes after its start, and on a stream of frames without false SOFs only the frame being
+/// received is held.
+///
+/// Work per byte, worst case: the held bytes' `MAX_FRAME_LEN − 5` = 256 possible starts compared
+/// (`AA`, `55`, then the length); a CRC only for each candidate that ends at this byte, at most 64
+/// of them over 8,384 bytes in all; a pass over the bytes held to find the first that may still
+/// start a frame; and, when the buffer is full, one move of the bytes held to its front (bytes
+/// dropped or delivered stay where they are until then). The 64 need a window crafted for it (false SOFs
+/// about four bytes apart whose LENs all end at the same byte: two starts ending together are at
+/// least 4 bytes apart, except once 2 for LEN 0x55 and once 3 for LEN 0xAA); the test
+/// `crc_work_per_byte_is_bounded` finds the bound by trying every set of LENs and builds such a
+/// window. A stream of frames without false SOFs costs one CRC per frame, at its last byte.
 #[derive(Clone, Debug)]
 pub struct StreamDecoder {
-    /// The bytes held are `buf[..len]`; `len <= MAX_FRAME_LEN` always.
+    /// `buf[..len]` are the last bytes pushed, at most [`MAX_FRAME_LEN`]; the bytes held are
+    /// `buf[first..len]`, from the oldest candidate that can still end (or a lone `AA` that may
+    /// start one) to the last byte pushed. The bytes before `first` are delivered or dropped (and
+    /// counted) but not moved: the bytes held move to the front only when the buffer is full.
+    /// `first <= len <= MAX_FRAME_LEN` always.
     buf: [u8; MAX_FRAME_LEN],
     len: usize,
+    first: usize,
     stats: Stats,
 }
 
@@ -540,6 +590,7 @@ impl StreamDecoder {
         Self {
             buf: [0; MAX_FRAME_LEN],
             len: 0,
+            first: 0,
             stats: Stats {
                 frames: 0,
                 crc_errors: 0,
@@ -554,95 +605,64 @@ impl StreamDecoder {
         self.stats
     }
 
-    /// Bytes held, waiting for the rest of a frame (at most [`MAX_FRAME_LEN`]).
+    /// Bytes held, waiting for the candidates among them to end (at most [`MAX_FRAME_LEN`]).
     pub fn buffered(&self) -> usize {
-        self.len
+        self.len.saturating_sub(self.first)
     }
 
-    /// The bytes held (none if the length were ever out of range, as `drop_front` also treats it).
-    fn held(&self) -> &[u8] {
+    /// `buf[..len]`: the bytes held and the dropped ones before them (none if the length were ever
+    /// out of range).
+    fn bytes(&self) -> &[u8] {
         self.buf.get(..self.len).unwrap_or(&[])
     }
 
-    /// Discards a partial frame (e.g. after an inter-byte timeout), counting its bytes as dropped.
+    /// Discards the bytes held (e.g. after an inter-byte timeout), counting them as dropped: the
+    /// next frame must start at the next byte.
     pub fn reset(&mut self) {
-        self.count_dropped(self.len);
+        self.count_dropped(self.buffered());
         self.len = 0;
+        self.first = 0;
     }
 
-    /// Adds one byte; returns a message or an error if one completed.
-    ///
-    /// A byte can complete at most one result; after an error, call [`poll`](Self::poll) until it
-    /// returns `None` to collect frames already buffered (or use [`feed`](Self::feed)).
+    /// Adds one byte; returns the frame that ends at it, a CRC failure, or `None` (the rules are
+    /// in the type's documentation). Every result is returned by the `push` of the byte that
+    /// completes it: nothing waits in the decoder to be collected later.
     pub fn push(&mut self, byte: u8) -> Option<Result<Message, Error>> {
         self.append(byte);
-        self.poll()
-    }
-
-    /// Returns the next result from bytes already buffered, without new input.
-    ///
-    /// Terminates: every `Scan::Again` step has dropped one buffered byte.
-    pub fn poll(&mut self) -> Option<Result<Message, Error>> {
-        loop {
-            if let Scan::Done(r) = self.poll_step() {
-                return r;
+        match self.complete() {
+            Completion::Frame { start, result } => {
+                self.deliver(start, &result);
+                Some(result)
+            }
+            Completion::BadCrc => {
+                self.advance();
+                Some(Err(Error::Crc))
+            }
+            Completion::Nothing => {
+                self.advance();
+                None
             }
         }
     }
 
-    /// One step of [`poll`](Self::poll): drop one byte that cannot start a frame
-    /// ([`Scan::Again`]), or finish with a result or with "need more bytes".
-    fn poll_step(&mut self) -> Scan {
-        let held = self.held();
-        match (held.first(), held.get(1)) {
-            (None, _) | (Some(0xAA), None) => return Scan::Done(None),
-            (Some(0xAA), Some(0x55)) => {}
-            _ => {
-                self.drop_front(1);
-                self.count_dropped(1);
-                return Scan::Again;
-            }
-        }
-        let Some(&len) = held.get(3) else {
-            return Scan::Done(None);
-        };
-        let need = HEADER_LEN
-            .saturating_add(usize::from(len))
-            .saturating_add(CRC_LEN);
-        let Some(frame) = held.get(..need) else {
-            return Scan::Done(None);
-        };
-        let result = decode_frame(frame);
-        match result {
-            Ok(_) => {
-                self.stats.frames = self.stats.frames.saturating_add(1);
-                self.drop_front(need);
-            }
-            Err(Error::Crc) => {
-                // Maybe a false SOF: rescan from the next byte.
-                self.stats.crc_errors = self.stats.crc_errors.saturating_add(1);
-                self.drop_front(1);
-                self.count_dropped(1);
-            }
-            Err(_) => {
-                self.stats.message_errors = self.stats.message_errors.saturating_add(1);
-                self.drop_front(need);
-            }
-        }
-        Scan::Done(Some(result))
-    }
-
-    /// Feeds a slice and iterates over every result it completes (buffered frames included).
+    /// Feeds a slice and iterates over every result it completes, in order.
     pub fn feed<'a>(&'a mut self, bytes: &'a [u8]) -> Feed<'a> {
         Feed { dec: self, bytes }
     }
 
     fn append(&mut self, byte: u8) {
         if self.len >= MAX_FRAME_LEN {
-            // Unreachable while `poll` runs after every byte (a frame is complete at MAX_FRAME_LEN);
-            // kept so that no call order can make the decoder fail.
-            self.drop_front(1);
-            self.count_dropped(1);
+            // Full: the bytes held move to the front, over the dropped ones. There is at least
+            // one: a candidate held ends within MAX_FRAME_LEN bytes of its start, so after the
+            // byte that filled the buffer `first` is past its first byte. If there were none all
+            // the same, the oldest byte goes, counted, so that no state can make the decoder fail.
+            let gone = self.first.clamp(1, MAX_FRAME_LEN);
+            if self.first == 0 {
+                self.count_dropped(1);
+            }
+            self.buf.copy_within(gone.., 0);
+            self.len = MAX_FRAME_LEN.saturating_sub(gone);
+            self.first = self.first.saturating_sub(gone);
         }
         if let Some(slot) = self.buf.get_mut(self.len) {
             *slot = byte;
@@ -650,12 +670,94 @@ impl StreamDecoder {
         }
     }
 
-    /// Removes the first `n` bytes held (all of them if fewer).
-    fn drop_front(&mut self, n: usize) {
-        let held = self.buf.get_mut(..self.len).unwrap_or(&mut []);
-        let n = n.min(held.len());
-        held.copy_within(n.., 0);
-        self.len = held.len().saturating_sub(n);
+    /// Checks the candidates that end at the last byte held and picks the earliest-starting one
+    /// with a good CRC. Counts the CRC failures of the candidates that start before it (all of
+    /// them if none is good).
+    fn complete(&mut self) -> Completion {
+        // By length, shortest first: the length and the start it gives (`len − length`) are plain
+        // counts from the end, so each byte is read at a fixed place (which is what keeps Kani's
+        // formulas small), and only the bytes held are visited. A longer candidate starts earlier.
+        // The loop runs to `len` and stops at the bytes held: a bound the solver knows.
+        let span = self.len.saturating_sub(self.first);
+        let mut best = None;
+        let mut bad_before_best = 0u32;
+        for length in MIN_FRAME_LEN..=self.len.min(MAX_FRAME_LEN) {
+            if length > span {
+                break;
+            }
+            let start = self.len.saturating_sub(length);
+            match self.candidate_at(start) {
+                Candidate::NotHere => {}
+                Candidate::BadCrc => bad_before_best = bad_before_best.saturating_add(1),
+                Candidate::Good(result) => {
+                    best = Some((start, result));
+                    bad_before_best = 0;
+                }
+            }
+        }
+        self.stats.crc_errors = self.stats.crc_errors.saturating_add(bad_before_best);
+        match best {
+            Some((start, result)) => Completion::Frame { start, result },
+            None if bad_before_best > 0 => Completion::BadCrc,
+            None => Completion::Nothing,
+        }
+    }
+
+    /// Whether the bytes from `buf[start]` on are a candidate (SOF, and a LEN that makes it end at
+    /// the last byte), and if so what its CRC and payload say. The CRC is computed only here.
+    ///
+    /// What [`decode_frame`] does, once the SOF and the length are known to be right, with every
+    /// slice cut by the frame's own length (the number of bytes from `start` to the last one)
+    /// rather than by the LEN byte: the same bytes, but lengths Kani's solver knows.
+    fn candidate_at(&self, start: usize) -> Candidate {
+        let frame = self.bytes().get(start..).unwrap_or(&[]);
+        let [0xAA, 0x55, msg_id, len, ..] = *frame else {
+            return Candidate::NotHere;
+        };
+        if frame.len() != usize::from(len).saturating_add(MIN_FRAME_LEN) {
+            return Candidate::NotHere;
+        }
+        let Some((body, stored)) = frame.split_last_chunk::<CRC_LEN>() else {
+            return Candidate::NotHere;
+        };
+        // MSG_ID, LEN and the payload; then the payload alone.
+        let covered = body.get(2..).unwrap_or(&[]);
+        if crc16::checksum(covered) != u16::from_le_bytes(*stored) {
+            return Candidate::BadCrc;
+        }
+        Candidate::Good(Message::decode(msg_id, covered.get(2..).unwrap_or(&[])))
+    }
+
+    /// Delivers the candidate at `buf[start]`, which ends at the last byte: the bytes held before
+    /// it are dropped, and every candidate that started before its end goes with it.
+    fn deliver(&mut self, start: usize, result: &Result<Message, Error>) {
+        self.count_dropped(start.saturating_sub(self.first));
+        self.first = self.len;
+        if result.is_ok() {
+            self.stats.frames = self.stats.frames.saturating_add(1);
+        } else {
+            self.stats.message_errors = self.stats.message_errors.saturating_add(1);
+        }
+    }
+
+    /// Drops the bytes at the front that can no longer start a frame, so that the first byte held
+    /// starts a candidate that can still end (or nothing is held).
+    fn advance(&mut self) {
+        let bytes = self.bytes();
+        let span = bytes.len().saturating_sub(self.first);
+        // From the end back to `first`, as in `complete`; the last one found is the first.
+        let mut live = bytes.len();
+        for back in 1..=bytes.len() {
+            if back > span {
+                break;
+            }
+            let i = bytes.len().saturating_sub(back);
+            if may_start(bytes, i) {
+                live = i;
+            }
+        }
+        self.count_dropped(live.saturating_sub(self.first));
+        self.first = live;
     }
 
     fn count_dropped(&mut self, n: usize) {
@@ -664,12 +766,41 @@ impl StreamDecoder {
     }
 }
 
-/// Outcome of one [`StreamDecoder::poll_step`].
-enum Scan {
-    /// One byte dropped; scan again.
-    Again,
-    /// `poll`'s answer.
-    Done(Option<Result<Message, Error>>),
+/// Whether a candidate may still start at `held[i]` and end at a byte not yet pushed: a lone `AA`,
+/// `AA 55`, `AA 55 MSG_ID`, or a header whose LEN puts the frame's end after the last byte held.
+fn may_start(held: &[u8], i: usize) -> bool {
+    match held.get(i..) {
+        Some([0xAA] | [0xAA, 0x55] | [0xAA, 0x55, _]) => true,
+        Some(rest @ [0xAA, 0x55, _, len, ..]) => {
+            usize::from(*len).saturating_add(MIN_FRAME_LEN) > rest.len()
+        }
+        _ => false,
+    }
+}
+
+/// What the candidates ending at the last byte gave ([`StreamDecoder::complete`]).
+enum Completion {
+    /// The earliest-starting candidate with a good CRC, at `start` of the bytes held.
+    Frame {
+        /// Where it starts in the bytes held.
+        start: usize,
+        /// Its message, or the payload's error.
+        result: Result<Message, Error>,
+    },
+    /// Candidates ended here, every one with a bad CRC.
+    BadCrc,
+    /// No candidate ended here.
+    Nothing,
+}
+
+/// One start position checked by [`StreamDecoder::candidate_at`].
+enum Candidate {
+    /// No candidate starts there, or it does not end at the last byte held.
+    NotHere,
+    /// A candidate whose CRC fails.
+    BadCrc,
+    /// A candidate with a good CRC: its message, or the payload's error.
+    Good(Result<Message, Error>),
 }
 
 /// Iterator returned by [`StreamDecoder::feed`].
@@ -682,14 +813,13 @@ impl Iterator for Feed<'_> {
     type Item = Result<Message, Error>;
 
     fn next(&mut self) -> Option<Self::Item> {
-        loop {
-            if let Some(r) = self.dec.poll() {
+        while let Some((&b, rest)) = self.bytes.split_first() {
+            self.bytes = rest;
+            if let Some(r) = self.dec.push(b) {
                 return Some(r);
             }
-            let (&b, rest) = self.bytes.split_first()?;
-            self.bytes = rest;
-            self.dec.append(b);
         }
+        None
     }
 }
 

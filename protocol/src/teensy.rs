@@ -16,14 +16,35 @@
 //!   16+4N      4   i32 cmd_success            (set by the Teensy in its echo)
 //!   20+4N      1   '\n'
 //! ```
-//! The delimiter is not an escape: any field may contain 0x0A, so a receiver that splits on
-//! `'\n'` loses sync, and nothing detects corrupted bytes. [`CmdMsg::decode_legacy`] accepts only a
-//! packet of exactly the right length ending in `'\n'` ([`RejectReason::Framing`] otherwise).
+//! [`CmdMsg::decode_legacy`] accepts only a packet of exactly the right length ending in `'\n'`
+//! ([`RejectReason::Framing`] otherwise). The delimiter is not an escape: any field may contain
+//! 0x0A, and nothing detects corrupted bytes. A receiver that splits the stream after each `'\n'`
+//! and decodes each piece therefore mis-splits (N = 4, test
+//! `legacy_split_on_newline_loses_and_corrupts_commands`):
+//!
+//! ```text
+//!  A = MTRS, angles [10, 0, 0, 0], speed 30, accel 60, 37 bytes:
+//!  00 00 00 00 00 00 00 00 0A | 00 00 00 (00 00 00 00)×3 1E 00 00 00 3C 00 00 00 00 00 00 00 0A
+//!  └──── piece 1: 9 bytes ───┘ └──────────────────── piece 2: 28 bytes ─────────────────────────┘
+//! ```
+//!
+//! - *Lost:* both pieces are refused, so A, and every command with a 0x0A in a field (an angle of
+//!   10°, 2,560° or −246°, a speed of 10 deg/s, …), never arrives, however often it is sent.
+//! - *Forged:* if A's `'\n'` is lost on the line and B (A with angle 2,560: `00 0A 00 00`)
+//!   follows, the 37 bytes from A's offset 9 to B's offset 9 end in 0x0A and decode as MTRS with
+//!   angles [0, 503316480, 1006632960, 0] (A's speed and acceleration bytes, shifted): a command
+//!   neither end sent.
+//!
+//! So no receiver of this framing can deliver every packet at its delimiter and refuse every
+//! piece that is not one: without a CRC, the 37 bytes before a 0x0A in a field can decode as well
+//! as a packet. `decode_legacy` stays as it is, for compatibility; the robust successor below has
+//! the property.
 //!
 //! # Robust successor
 //!
 //! The same `CmdMsg` bytes behind a version byte and followed by a CRC, COBS-encoded, and ended by
-//! 0x00 (COBS leaves no other zero in the frame, so a receiver always resynchronises at the next 0x00):
+//! 0x00 (COBS leaves no other zero in the frame, so a receiver always resynchronises at the next
+//! 0x00, and [`RobustDecoder`] delivers a valid frame at its 0x00 whatever came before it):
 //!
 //! ```text
 //!  COBS( ROBUST_VERSION (1 B) | CmdMsg (20+4N B) | CRC-16/CCITT-FALSE LE over the previous bytes (2 B) ) | 0x00
@@ -258,7 +279,16 @@ impl<const N: usize> CmdMsg<N> {
         }
         let mut body = [0u8; ROBUST_BODY_BUF];
         let n = unstuff(frame, &mut body).ok_or(RejectReason::Framing)?;
-        Self::decode_body(body.get(..n).ok_or(RejectReason::Framing)?)
+        // `n` is the fixed body length here (the frame's was checked); slicing by the constant
+        // keeps every length below known to Kani's solver, which does not carry `n`'s value over
+        // from the check.
+        if n != robust_body_len(N) {
+            return Err(RejectReason::Framing);
+        }
+        Self::decode_body(
+            body.get(..robust_body_len(N))
+                .ok_or(RejectReason::Framing)?,
+        )
     }
 
     /// Reads a robust frame's body after COBS: length → `Framing`, CRC → `Crc`, version →
@@ -268,7 +298,10 @@ impl<const N: usize> CmdMsg<N> {
         if n != robust_body_len(N) {
             return Err(RejectReason::Framing);
         }
-        let (covered, crc) = body.split_at(n.saturating_sub(2));
+        // Split at the constant rather than at `n` (equal here), as in `decode_robust`.
+        let (covered, crc) = body
+            .split_at_checked(robust_body_len(N).saturating_sub(2))
+            .ok_or(RejectReason::Framing)?;
         let stored = <[u8; 2]>::try_from(crc).map_err(|_| RejectReason::Framing)?;
         if crc16::checksum(covered) != u16::from_le_bytes(stored) {
             return Err(RejectReason::Crc);
@@ -348,17 +381,55 @@ pub(crate) fn unstuff(frame: &[u8], out: &mut [u8]) -> Option<usize> {
 pub struct RobustStats {
     /// Commands delivered.
     pub frames: u32,
-    /// Frames refused (framing, CRC, version, decode).
+    /// Frames refused (framing, CRC, version, decode): one per 0x00 that ends a non-empty run.
     pub errors: u32,
-    /// Bytes discarded because a frame grew past the buffer.
+    /// Non-zero bytes discarded because more than `ROBUST_LEN − 1` came without a 0x00: each byte
+    /// of a run but its last `ROBUST_LEN − 1` (garbage before a frame, or a run too long for one).
     pub dropped_bytes: u32,
 }
 
-/// Splits a byte stream at 0x00 and decodes each robust frame; bounded to [`ROBUST_BUF`] bytes.
+/// Decodes the robust frame that ends at each 0x00 of a byte stream; bounded to [`ROBUST_BUF`]
+/// bytes.
+///
+/// # Property
+///
+/// Every robust frame of `N` motors is [`CmdMsg::ROBUST_LEN`] bytes long (`L` below), its last
+/// byte 0x00 and no other. So the only frame that can end at a 0x00 is the `L − 1` bytes before
+/// it, and only if none of them is 0x00: the decoder keeps the last `L − 1` non-zero bytes of the
+/// current run and nothing else. After `push(b[k])`:
+///
+/// 1. if `b[k]` is 0x00 and the `L − 1` bytes before it are non-zero, `push` returns
+///    `Some(CmdMsg::decode_robust(b[k+1−L ..= k]))`. A frame whose COBS structure and CRC are
+///    good is thus delivered at its 0x00, as `Ok(command)` or the message's error
+///    ([`RejectReason::Version`], [`RejectReason::Decode`]), whatever non-zero bytes came
+///    before it: those are dropped and counted in [`RobustStats::dropped_bytes`];
+/// 2. if `b[k]` is 0x00 after 1 to `L − 2` non-zero bytes, it returns
+///    `Some(Err(RejectReason::Framing))`: too short for a frame;
+/// 3. otherwise (a non-zero byte, or a 0x00 right after another or at the start) it returns `None`.
+///
+/// Checked against a naive reference that tries `decode_robust` on every slice ending at the
+/// byte, by the exhaustive test `robust_stream_holds_back_no_frame_exhaustively`, the Kani
+/// harness `verify_robust_holds_back_no_frame` with its twin, and the fuzz target
+/// `fuzz_teensy_stream_holds_back_no_frame`.
+///
+/// ```text
+///  bytes:  13 37 02 5A … 3B 00 02 5A … 3B 00
+///          └───┘ └───────────┘ └───────────┘
+///          dropped  a frame     the next one
+/// ```
+///
+/// Each frame (`L` bytes) is delivered by the `push` of its 0x00; the non-zero bytes before it
+/// without a 0x00 between (13 37) are dropped and counted.
+///
+/// Per byte: a non-zero byte is stored, moving the `L − 2` bytes kept when the run is longer
+/// than `L − 1`; a 0x00 decodes at most one frame (one COBS pass and one CRC over `L − 3`
+/// bytes).
 #[derive(Clone, Debug)]
 pub struct RobustDecoder<const N: usize> {
-    buf: heapless::Vec<u8, ROBUST_BUF>,
-    overflow: bool,
+    /// The bytes held are `buf[..len]`: the last non-zero bytes since the last 0x00, at most
+    /// `ROBUST_LEN − 1` of them (`buf[len]` takes the terminator when a frame is decoded).
+    buf: [u8; ROBUST_BUF],
+    len: usize,
     stats: RobustStats,
 }
 
@@ -369,12 +440,15 @@ impl<const N: usize> Default for RobustDecoder<N> {
 }
 
 impl<const N: usize> RobustDecoder<N> {
+    /// Bytes of a frame before its terminator: the most the decoder keeps.
+    const WINDOW: usize = CmdMsg::<N>::ROBUST_LEN.saturating_sub(1);
+
     /// An empty decoder.
     pub const fn new() -> Self {
         let () = CmdMsg::<N>::FITS;
         Self {
-            buf: heapless::Vec::new(),
-            overflow: false,
+            buf: [0; ROBUST_BUF],
+            len: 0,
             stats: RobustStats {
                 frames: 0,
                 errors: 0,
@@ -388,34 +462,51 @@ impl<const N: usize> RobustDecoder<N> {
         self.stats
     }
 
-    /// Adds one byte; at a 0x00 returns the frame's command or error (empty frames are ignored).
+    /// Adds one byte; at a 0x00 returns the frame that ends there, or why there is none (empty
+    /// runs are ignored). The rules are in the type's documentation.
     pub fn push(&mut self, byte: u8) -> Option<Result<CmdMsg<N>, RejectReason>> {
         if byte != 0 {
-            if self.buf.len() >= CmdMsg::<N>::ROBUST_LEN.saturating_sub(1)
-                || self.buf.push(byte).is_err()
-            {
-                self.overflow = true;
-                self.stats.dropped_bytes = self.stats.dropped_bytes.saturating_add(1);
+            self.keep(byte);
+            return None;
+        }
+        let held = core::mem::replace(&mut self.len, 0);
+        if held == 0 {
+            return None;
+        }
+        let result = match self.buf.get_mut(..=Self::WINDOW) {
+            Some(frame) if held == Self::WINDOW => {
+                if let Some(terminator) = frame.last_mut() {
+                    *terminator = 0;
+                }
+                CmdMsg::<N>::decode_robust(frame)
             }
-            return None;
-        }
-        let overflow = core::mem::replace(&mut self.overflow, false);
-        if self.buf.is_empty() && !overflow {
-            return None;
-        }
-        let result = if overflow {
-            Err(RejectReason::Framing)
-        } else {
-            let _ = self.buf.push(0);
-            CmdMsg::<N>::decode_robust(&self.buf)
+            _ => Err(RejectReason::Framing),
         };
-        self.buf.clear();
         if result.is_ok() {
             self.stats.frames = self.stats.frames.saturating_add(1);
         } else {
             self.stats.errors = self.stats.errors.saturating_add(1);
         }
         Some(result)
+    }
+
+    /// Keeps a non-zero byte, dropping the oldest byte held if `WINDOW` are held already (the
+    /// bytes move by one place: a fixed move, whatever the state).
+    fn keep(&mut self, byte: u8) {
+        if self.len >= Self::WINDOW {
+            if let Some(window) = self.buf.get_mut(..Self::WINDOW) {
+                window.copy_within(1.., 0);
+            }
+            // One byte, unless the state was out of range (more than WINDOW held).
+            let drop = self.len.saturating_sub(Self::WINDOW).saturating_add(1);
+            self.len = Self::WINDOW.saturating_sub(1);
+            let drop = u32::try_from(drop).unwrap_or(u32::MAX);
+            self.stats.dropped_bytes = self.stats.dropped_bytes.saturating_add(drop);
+        }
+        if let Some(slot) = self.buf.get_mut(self.len) {
+            *slot = byte;
+            self.len = self.len.saturating_add(1);
+        }
     }
 }
 

@@ -2,6 +2,13 @@
 //! inputs; for a longer run set `BOLERO_RANDOM_ITERATIONS` (see protocol/README.md), e.g.
 //! `BOLERO_RANDOM_ITERATIONS=2000000 cargo test --release -p protocol --test fuzz -- --nocapture`.
 //! Every target also checks that whatever decodes re-encodes to the same message.
+//!
+//! The two `*_stream_holds_back_no_frame` targets check the stream decoders' property (a frame
+//! with a good CRC is delivered at its last byte, whatever came before it; see
+//! `cdc::StreamDecoder` and `teensy::RobustDecoder`) at every byte of a stream built from the
+//! input, with valid, truncated and raw frames spliced in, against a naive reference written
+//! here (independent of the one in the crate's harnesses). Coverage-guided runs (libFuzzer, through
+//! `cargo bolero`, nightly) and their figures are in protocol/README.md.
 #![allow(
     clippy::unwrap_used,
     clippy::indexing_slicing,
@@ -190,4 +197,252 @@ fn fuzz_teensy() {
             }
         });
     report("teensy", &N);
+}
+
+/// Reads the fuzzer's bytes, 0 once they run out.
+struct Bytes<'a>(&'a [u8]);
+
+impl Bytes<'_> {
+    fn u8(&mut self) -> u8 {
+        let (&b, rest) = self.0.split_first().unwrap_or((&0, &[]));
+        self.0 = rest;
+        b
+    }
+    fn u16(&mut self) -> u16 {
+        u16::from_le_bytes([self.u8(), self.u8()])
+    }
+    fn u32(&mut self) -> u32 {
+        u32::from_le_bytes([self.u8(), self.u8(), self.u8(), self.u8()])
+    }
+}
+
+/// A seed 001 message of kind `kind % 7`, its fields read from `b`.
+fn cdc_message(kind: u8, b: &mut Bytes) -> cdc::Message {
+    use cdc::Message as M;
+    match kind % 7 {
+        0 => M::SetMotorPwm(cdc::SetMotorPwm {
+            pwm: [
+                b.u16() as i16,
+                b.u16() as i16,
+                b.u16() as i16,
+                b.u16() as i16,
+            ],
+            timeout_ms: b.u16(),
+        }),
+        1 => M::MotorEnable(b.u8() & 1 == 1),
+        2 => M::Estop(if b.u8() & 1 == 1 {
+            statemachine::Estop::Engage
+        } else {
+            statemachine::Estop::Release
+        }),
+        3 => M::Ping,
+        4 => M::Ack(cdc::Ack {
+            msg_id: b.u8(),
+            result: b.u8(),
+        }),
+        5 => M::Imu(cdc::Imu {
+            t_ms: b.u32(),
+            accel_mg: [b.u16() as i16, b.u16() as i16, b.u16() as i16],
+            gyro_mdps: [b.u16() as i16, b.u16() as i16, b.u16() as i16],
+            temp_cdeg: b.u16() as i16,
+        }),
+        _ => M::Status(cdc::Status {
+            t_ms: b.u32(),
+            vbat_mv: b.u16(),
+            flags: cdc::StatusFlags(b.u16()),
+            err: b.u16(),
+        }),
+    }
+}
+
+/// The seed 001 stream the input describes: each byte is itself, except 0xF0..=0xFE, which
+/// splice in a valid frame (0xF0..=0xF6, one per kind, fields from the next bytes), a frame of any
+/// MSG_ID with up to 31 payload bytes and a good CRC (0xF7..=0xF9), a valid frame cut short or with
+/// one byte replaced (0xFA..=0xFD), or the next byte as it is (0xFE).
+fn cdc_stream(input: &[u8]) -> Vec<u8> {
+    let mut b = Bytes(input);
+    let mut out = Vec::new();
+    while let Some((&c, rest)) = b.0.split_first() {
+        b.0 = rest;
+        let mut frame = [0u8; cdc::MAX_FRAME_LEN];
+        match c {
+            0xF0..=0xF6 => {
+                let n = cdc_message(c - 0xF0, &mut b).encode(&mut frame);
+                out.extend_from_slice(&frame[..n]);
+            }
+            0xF7..=0xF9 => {
+                let id = b.u8();
+                let len = usize::from(b.u8() % 32);
+                let payload: Vec<u8> = (0..len).map(|_| b.u8()).collect();
+                let n = cdc::encode_raw(id, &payload, &mut frame);
+                out.extend_from_slice(&frame[..n]);
+            }
+            0xFA..=0xFD => {
+                let kind = b.u8();
+                let n = cdc_message(kind, &mut b).encode(&mut frame);
+                let at = usize::from(b.u8()) % n;
+                if c < 0xFC {
+                    out.extend_from_slice(&frame[..at]);
+                } else {
+                    frame[at] = b.u8();
+                    out.extend_from_slice(&frame[..n]);
+                }
+            }
+            0xFE => out.push(b.u8()),
+            _ => out.push(c),
+        }
+    }
+    out
+}
+
+/// The property of `cdc::StreamDecoder`, naively: after each byte, `decode_frame` on every slice
+/// that ends there and starts at or after the end of the last frame delivered, within a frame's
+/// length of the end, earliest first (only at the starts that hold 0xAA: `decode_frame` refuses
+/// any other at its first byte, and skipping them keeps the fuzzer fast). Also checks the
+/// counters: one CRC error per candidate that failed, and every byte delivered, dropped or held.
+fn check_cdc_stream(stream: &[u8]) -> u32 {
+    let mut dec = cdc::StreamDecoder::new();
+    let (mut boundary, mut dropped, mut crc_errors, mut delivered) = (0usize, 0usize, 0u32, 0u32);
+    let aa: Vec<usize> = (0..stream.len()).filter(|&i| stream[i] == 0xAA).collect();
+    for end in 1..=stream.len() {
+        let got = dec.push(stream[end - 1]);
+        let mut want = None;
+        let lo = boundary.max(end.saturating_sub(cdc::MAX_FRAME_LEN));
+        let from = aa.partition_point(|&i| i < lo);
+        for &start in aa[from..].iter().take_while(|&&i| i < end) {
+            match cdc::decode_frame(&stream[start..end]) {
+                Err(cdc::Error::Framing) => {}
+                Err(cdc::Error::Crc) => {
+                    crc_errors += 1;
+                    want = Some(Err(cdc::Error::Crc));
+                }
+                r => {
+                    want = Some(r);
+                    dropped += start - boundary;
+                    boundary = end;
+                    delivered += 1;
+                    break;
+                }
+            }
+        }
+        assert_eq!(got, want, "byte {} of {:02X?}", end - 1, stream);
+        let s = dec.stats();
+        assert_eq!(s.crc_errors, crc_errors);
+        assert_eq!(s.frames + s.message_errors, delivered);
+        assert_eq!(
+            s.dropped_bytes as usize + dec.buffered(),
+            dropped + end - boundary
+        );
+    }
+    delivered
+}
+
+#[test]
+fn fuzz_cdc_stream_holds_back_no_frame() {
+    static N: AtomicU64 = AtomicU64::new(0);
+    static FRAMES: AtomicU64 = AtomicU64::new(0);
+    bolero::check!().with_max_len(64).for_each(|input: &[u8]| {
+        N.fetch_add(1, Ordering::Relaxed);
+        let delivered = check_cdc_stream(&cdc_stream(input));
+        FRAMES.fetch_add(u64::from(delivered), Ordering::Relaxed);
+    });
+    report("cdc_stream_holds_back_no_frame", &N);
+    eprintln!("  frames delivered: {}", FRAMES.load(Ordering::Relaxed));
+}
+
+type Robust = teensy::CmdMsg<4>;
+
+/// A seed 003 command of 4 motors, its fields read from `b`.
+fn teensy_command(b: &mut Bytes) -> Robust {
+    teensy::CmdMsg {
+        cmd_type: teensy::CmdType::from_raw(i32::from(b.u8() % 6)).unwrap_or_default(),
+        is_relative: b.u32() as i32,
+        mtr_angles: [
+            b.u32() as i32,
+            b.u32() as i32,
+            b.u32() as i32,
+            b.u32() as i32,
+        ],
+        mtr_speed_deg_s: b.u32() as i32,
+        mtr_accel_deg_s_s: b.u32() as i32,
+        cmd_success: b.u32() as i32,
+    }
+}
+
+/// The seed 003 robust stream the input describes: each byte is itself, except 0xF0..=0xFE, which
+/// splice in a valid frame (0xF0..=0xF7, fields from the next bytes; small field values are
+/// frequent, so frames hold zeros that COBS replaces), a valid frame cut short or with one byte
+/// replaced (0xF8..=0xFD), or the next byte as it is (0xFE).
+fn teensy_stream(input: &[u8]) -> Vec<u8> {
+    let mut b = Bytes(input);
+    let mut out = Vec::new();
+    while let Some((&c, rest)) = b.0.split_first() {
+        b.0 = rest;
+        let mut frame = [0u8; Robust::ROBUST_LEN];
+        match c {
+            0xF0..=0xFD => {
+                let n = teensy_command(&mut b).encode_robust(&mut frame).unwrap();
+                match c {
+                    0xF0..=0xF7 => out.extend_from_slice(&frame[..n]),
+                    0xF8..=0xFA => out.extend_from_slice(&frame[..usize::from(b.u8()) % n]),
+                    _ => {
+                        frame[usize::from(b.u8()) % n] = b.u8();
+                        out.extend_from_slice(&frame[..n]);
+                    }
+                }
+            }
+            0xFE => out.push(b.u8()),
+            _ => out.push(c),
+        }
+    }
+    out
+}
+
+/// The property of `teensy::RobustDecoder`, naively: after each byte, `decode_robust` on every
+/// slice that ends there (up to a few bytes longer than a frame); a frame whose COBS and CRC are
+/// good must be what `push` returns. Where none is, `push` answers only at a 0x00 after a non-zero
+/// byte, with a framing or CRC error.
+fn check_teensy_stream(stream: &[u8]) -> u32 {
+    let mut dec = teensy::RobustDecoder::<4>::new();
+    let mut delivered = 0;
+    for end in 1..=stream.len() {
+        let got = dec.push(stream[end - 1]);
+        let want = (end.saturating_sub(Robust::ROBUST_LEN + 4)..end)
+            .map(|start| Robust::decode_robust(&stream[start..end]))
+            .find(|r| !matches!(r, Err(RejectReason::Framing | RejectReason::Crc)));
+        match want {
+            Some(w) => {
+                assert_eq!(got, Some(w), "byte {} of {:02X?}", end - 1, stream);
+                delivered += 1;
+            }
+            None => {
+                let answers = matches!(stream[..end], [.., b, 0] if b != 0);
+                assert_eq!(
+                    got.is_some(),
+                    answers,
+                    "byte {} of {:02X?}",
+                    end - 1,
+                    stream
+                );
+                assert!(matches!(
+                    got,
+                    None | Some(Err(RejectReason::Framing | RejectReason::Crc))
+                ));
+            }
+        }
+    }
+    delivered
+}
+
+#[test]
+fn fuzz_teensy_stream_holds_back_no_frame() {
+    static N: AtomicU64 = AtomicU64::new(0);
+    static FRAMES: AtomicU64 = AtomicU64::new(0);
+    bolero::check!().with_max_len(64).for_each(|input: &[u8]| {
+        N.fetch_add(1, Ordering::Relaxed);
+        let delivered = check_teensy_stream(&teensy_stream(input));
+        FRAMES.fetch_add(u64::from(delivered), Ordering::Relaxed);
+    });
+    report("teensy_stream_holds_back_no_frame", &N);
+    eprintln!("  frames delivered: {}", FRAMES.load(Ordering::Relaxed));
 }

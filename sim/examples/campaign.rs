@@ -15,7 +15,7 @@
 
 use motorlink::SimHost;
 use sim::rng::Rng;
-use sim::scenario::{CmdVelSegment, Expect, Fault, HostSettings, Request, Scenario};
+use sim::scenario::{CmdVelSegment, Expect, Fault, HostSettings, Profile, Request, Scenario};
 
 #[derive(Default, Clone, Copy)]
 struct Tally {
@@ -88,6 +88,10 @@ fn scenario(i: u64) -> Scenario {
             },
         ],
         expect: Expect::default(),
+        profile: Profile::AmrSpi,
+        serial: Default::default(),
+        cdc: Default::default(),
+        teensy: Default::default(),
     }
 }
 

@@ -99,15 +99,38 @@ impl PlantParams {
 
     /// Effective translational mass including both rotors, kg.
     pub fn m_eff(&self) -> f64 {
-        let r = self.wheel_radius_m;
-        self.mass_kg + 2.0 * self.j_rotor * self.gear * self.gear / (r * r)
+        self.m_eff_with(2.0)
     }
 
     /// Effective yaw inertia including both rotors, kg·m².
     pub fn j_eff(&self) -> f64 {
+        self.j_eff_with(2.0)
+    }
+
+    /// Effective translational mass with `rotors` motors (half on each side), kg.
+    pub fn m_eff_with(&self, rotors: f64) -> f64 {
+        let r = self.wheel_radius_m;
+        self.mass_kg + rotors * self.j_rotor * self.gear * self.gear / (r * r)
+    }
+
+    /// Effective yaw inertia with `rotors` motors (half on each side, at ± wheelbase/2), kg·m².
+    pub fn j_eff_with(&self, rotors: f64) -> f64 {
         let r = self.wheel_radius_m;
         let h = self.wheelbase_m / 2.0;
-        self.yaw_inertia + 2.0 * self.j_rotor * self.gear * self.gear * h * h / (r * r)
+        self.yaw_inertia + rotors * self.j_rotor * self.gear * self.gear * h * h / (r * r)
+    }
+
+    /// The winding current after one step of `L di/dt = u − R i − Ke ω_m`, integrated exactly for
+    /// constant `u` (V) and wheel speed `wheel` (rad/s) from `i0` (A); `decay` is e^(−dt R / L).
+    pub fn winding_current(&self, i0: f64, u: f64, wheel: f64, decay: f64) -> f64 {
+        let emf = self.kt * self.gear * wheel;
+        let i_inf = (u - emf) / self.r_ohm;
+        i_inf + (i0 - i_inf) * decay
+    }
+
+    /// The force one motor's current `i` (A) puts on the ground at its wheel, N.
+    pub fn wheel_force(&self, i: f64) -> f64 {
+        self.gear * self.kt * i / self.wheel_radius_m
     }
 
     /// Braking force per m/s of both shorted motors in steady state (L neglected), N·s/m:
@@ -220,12 +243,17 @@ impl Plant {
                 BridgeDrive::Pwm(d) => d.clamp(-1.0, 1.0) * p.v_bus,
                 BridgeDrive::Short => 0.0,
             } + ek;
-            let emf = p.kt * p.gear * wk;
-            let i_inf = (u - emf) / p.r_ohm;
-            let i = i_inf + (self.current[k] - i_inf) * a;
+            let i = p.winding_current(self.current[k], u, wk, a);
             self.current[k] = i;
-            force[k] = p.gear * p.kt * i / p.wheel_radius_m;
+            force[k] = p.wheel_force(i);
         }
+        self.move_body(dt, force, p.m_eff(), p.j_eff());
+    }
+
+    /// Advances the body by `dt` seconds under the total wheel force on each side (left, right),
+    /// N, with the effective mass and yaw inertia given (they depend on the number of rotors).
+    pub fn move_body(&mut self, dt: f64, force: [f64; 2], m_eff: f64, j_eff: f64) {
+        let p = self.p;
         let h = p.wheelbase_m / 2.0;
         let roll = if self.v.abs() < 1e-4 {
             // Static: rolling resistance only opposes what would move the robot.
@@ -234,8 +262,8 @@ impl Plant {
         } else {
             -p.rolling_n * self.v.signum()
         };
-        let dv = (force[0] + force[1] - p.drag_v * self.v + roll) / p.m_eff();
-        let dw = ((force[1] - force[0]) * h - p.drag_w * self.w) / p.j_eff();
+        let dv = (force[0] + force[1] - p.drag_v * self.v + roll) / m_eff;
+        let dw = ((force[1] - force[0]) * h - p.drag_w * self.w) / j_eff;
         let v_new = self.v + dv * dt;
         // Rolling resistance cannot reverse the motion within a step.
         self.v = if self.v != 0.0

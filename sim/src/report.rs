@@ -10,20 +10,24 @@ fn opt(x: Option<f64>, digits: usize) -> String {
     x.map_or_else(|| "-".to_string(), |v| format!("{v:.digits$}"))
 }
 
-/// Column headers of the summary table.
-pub const COLUMNS: [&str; 14] = [
+/// Column headers of the summary table. A column that does not apply to a profile shows "-".
+pub const COLUMNS: [&str; 18] = [
     "scenario",
+    "profile",
     "result",
     "HOLD ms",
     "STOP ms",
     "BRAKE ms",
     "BRAKE after last frame ms",
     "bridge braked after last frame ms",
+    "BRAKE after last frame ticks",
     "v at onset m/s",
     "stop distance m",
     "corrupted sent/rejected/applied",
     "final mode",
     "clock err us",
+    "replies decoded/bad",
+    "joint err steps",
     "host reports",
     "speed x real time",
 ];
@@ -31,6 +35,7 @@ pub const COLUMNS: [&str; 14] = [
 fn row(s: &Summary, failures: &[String]) -> Vec<String> {
     vec![
         s.name.clone(),
+        s.profile.clone(),
         if failures.is_empty() {
             "PASS".into()
         } else {
@@ -41,6 +46,8 @@ fn row(s: &Summary, failures: &[String]) -> Vec<String> {
         opt(s.brake_ms, 1),
         opt(s.brake_after_last_frame_ms, 2),
         opt(s.bridge_brake_after_last_frame_ms, 2),
+        s.brake_after_last_frame_ticks
+            .map_or_else(|| "-".to_string(), |n| n.to_string()),
         opt(s.speed_at_onset, 2),
         opt(s.stop_distance_m, 3),
         format!(
@@ -49,6 +56,9 @@ fn row(s: &Summary, failures: &[String]) -> Vec<String> {
         ),
         s.final_mode.clone(),
         opt(s.clock_err_final_us, 1),
+        s.replies
+            .map_or_else(|| "-".to_string(), |[ok, bad]| format!("{ok}/{bad}")),
+        opt(s.joint_err_steps, 2),
         s.host_reports
             .iter()
             .map(|(t, n, c)| format!("{n}@{t:.3}s×{c}"))
@@ -145,11 +155,44 @@ pub fn plot(path: &Path, title: &str, r: &RunResult) -> Result<(), String> {
     let panels = root.split_evenly((3, 1));
     let e = |x: DrawingAreaErrorKind<std::io::Error>| x.to_string();
 
-    // Speeds.
+    // Speeds (seed 000), or the profile's own signals.
+    const PALETTE: [RGBColor; 8] = [
+        BLUE,
+        RED,
+        RGBColor(0, 150, 0),
+        MAGENTA,
+        CYAN,
+        RGBColor(160, 120, 0),
+        RGBColor(120, 120, 120),
+        BLACK,
+    ];
+    type Line<'a> = (&'a str, &'a Vec<f64>, RGBColor);
+    let (caption, lines): (&str, Vec<Line>) = match &s.lines {
+        Some(panel) => (
+            panel.caption.as_str(),
+            panel
+                .signals
+                .iter()
+                .zip(PALETTE.iter().cycle())
+                .map(|((name, ys), c)| (name.as_str(), ys, *c))
+                .collect(),
+        ),
+        None => (
+            "wheel speed (rad/s)",
+            vec![
+                ("left wheel", &s.wheel[0], BLUE),
+                ("right wheel", &s.wheel[1], RED),
+                ("left applied (ladder)", &s.applied[0], CYAN),
+                ("right applied (ladder)", &s.applied[1], MAGENTA),
+                ("left host command", &s.host_cmd[0], RGBColor(0, 120, 0)),
+                ("right host command", &s.host_cmd[1], RGBColor(160, 120, 0)),
+            ],
+        ),
+    };
     let mut lo = -1.0f64;
     let mut hi = 1.0f64;
-    for k in 0..2 {
-        for v in s.wheel[k].iter().chain(&s.host_cmd[k]).chain(&s.applied[k]) {
+    for (_, ys, _) in &lines {
+        for v in ys.iter().filter(|v| v.is_finite()) {
             lo = lo.min(*v);
             hi = hi.max(*v);
         }
@@ -159,21 +202,15 @@ pub fn plot(path: &Path, title: &str, r: &RunResult) -> Result<(), String> {
         .margin(8)
         .x_label_area_size(30)
         .y_label_area_size(60)
-        .caption("wheel speed (rad/s)", ("sans-serif", 15))
+        .caption(caption, ("sans-serif", 15))
         .build_cartesian_2d(t0..t1, (lo - pad)..(hi + pad))
         .map_err(e)?;
     c.configure_mesh().x_desc("t (s)").draw().map_err(e)?;
-    let lines: [(&str, &Vec<f64>, RGBColor); 6] = [
-        ("left wheel", &s.wheel[0], BLUE),
-        ("right wheel", &s.wheel[1], RED),
-        ("left applied (ladder)", &s.applied[0], CYAN),
-        ("right applied (ladder)", &s.applied[1], MAGENTA),
-        ("left host command", &s.host_cmd[0], RGBColor(0, 120, 0)),
-        ("right host command", &s.host_cmd[1], RGBColor(160, 120, 0)),
-    ];
     for (name, ys, color) in lines {
         c.draw_series(LineSeries::new(
-            idx.iter().map(|&i| (s.t[i], ys[i])),
+            idx.iter()
+                .filter(|&&i| ys[i].is_finite())
+                .map(|&i| (s.t[i], ys[i])),
             color.stroke_width(1),
         ))
         .map_err(e)?
@@ -220,9 +257,11 @@ pub fn plot(path: &Path, title: &str, r: &RunResult) -> Result<(), String> {
     let age: Vec<u8> = s.age.iter().map(|&m| m.min(255) as u8).collect();
     let top = f64::from(age.iter().copied().max().unwrap_or(0).max(12)) + 1.0;
     let th = statemachine::ConfigParams::DEFAULT;
+    let [hold_after, stop_after, brake_after] =
+        s.thresholds
+            .unwrap_or([th.hold_after, th.stop_after, th.brake_after]);
     let caption = format!(
-        "watchdog age (ticks since last valid frame; HOLD ≥ {}, STOP ≥ {}, BRAKE ≥ {})",
-        th.hold_after, th.stop_after, th.brake_after
+        "watchdog age (ticks since last valid frame; HOLD ≥ {hold_after}, STOP ≥ {stop_after}, BRAKE ≥ {brake_after})"
     );
     let mut c = ChartBuilder::on(&panels[2])
         .margin(8)
@@ -235,9 +274,9 @@ pub fn plot(path: &Path, title: &str, r: &RunResult) -> Result<(), String> {
     c.draw_series(LineSeries::new(bucket_max(&age), BLUE.stroke_width(1)))
         .map_err(e)?;
     for (lvl, col) in [
-        (th.hold_after, RGBColor(200, 150, 0)),
-        (th.stop_after, RGBColor(230, 90, 0)),
-        (th.brake_after, RED),
+        (hold_after, RGBColor(200, 150, 0)),
+        (stop_after, RGBColor(230, 90, 0)),
+        (brake_after, RED),
     ] {
         let lvl = f64::from(lvl);
         c.draw_series(LineSeries::new(

@@ -16,9 +16,10 @@ use statemachine::{FaultFlags, Mode};
 
 use crate::board::SimBoard;
 use crate::host::HostModel;
+use crate::measure::{add_report, Trace, Watch};
 use crate::plant::{BridgeDrive, Plant};
 use crate::rng::Rng;
-use crate::scenario::{Fault, Request, Scenario};
+use crate::scenario::{Fault, Profile, Request, Scenario};
 
 /// MCU step: the 20 kHz current loop.
 pub const STEP_S: f64 = 50e-6;
@@ -47,9 +48,23 @@ pub fn mode_name(m: Mode) -> &'static str {
     }
 }
 
-/// Per-tick series for plots.
+/// A plot panel of named signals over the series' time.
+#[derive(Clone, Debug, Default)]
+pub struct Panel {
+    /// Caption.
+    pub caption: String,
+    /// (name, one value per time of the series).
+    pub signals: Vec<(String, Vec<f64>)>,
+}
+
+/// Per-tick series for plots. The seed 000 run fills the wheel, command and setpoint series; the
+/// serial profiles put their own signals in `lines` instead.
 #[derive(Clone, Debug, Default)]
 pub struct Series {
+    /// The first panel, when not the wheel speeds.
+    pub lines: Option<Panel>,
+    /// The profile's HOLD, STOP and BRAKE ages, ticks (seed 000's when `None`).
+    pub thresholds: Option<[u16; 3]>,
     /// Time, s.
     pub t: Vec<f64>,
     /// True wheel speeds, rad/s.
@@ -125,6 +140,41 @@ pub struct Summary {
     pub clock_err_max_us: Option<f64>,
     /// The seed estimator's error at the end, µs.
     pub seed_clock_err_final_us: Option<f64>,
+    /// The board and link (`amr-spi`, `cdc`, `teensy`).
+    pub profile: String,
+    /// Serial profiles: first comm-loss BRAKE, in the board's ticks since the tick count at the
+    /// last valid frame.
+    pub brake_after_last_frame_ticks: Option<u32>,
+    /// Serial profiles: replies the host decoded and frames it could not decode.
+    pub replies: Option<[u64; 2]>,
+    /// Serial profiles: replies that were not what the host expected (ACK results, echoes), and
+    /// expected replies that never came.
+    pub reply_failures: Vec<String>,
+    /// Serial profiles: ticks at which BRAKE was left without a re-arm message delivered since
+    /// the latch.
+    pub rearm_violations: u64,
+    /// Serial profiles: replies dropped by the board because its transmit queue was full.
+    pub tx_dropped: u64,
+    /// Seed 001: time from the last byte of each `ESTOP 1` to every motor shorted, the largest, ms.
+    pub estop_brake_ms: Option<f64>,
+    /// Seed 001: largest |duty| applied from the first tick after a `MOTOR_ENABLE 0` reached the
+    /// board until the next `MOTOR_ENABLE 1` (must be 0: the seed's "outputs forced to 0").
+    pub duty_while_disabled: Option<f64>,
+    /// Seed 001: IMU frames whose values saturated (the seed's i16 mdps ends at ±32.767 dps).
+    pub imu_saturated: u64,
+    /// Seed 001: largest difference between a decoded IMU frame and the true motion at its time
+    /// (mg, mdps), unsaturated frames.
+    pub imu_max_err: Option<[f64; 2]>,
+    /// Seed 003: largest distance of a joint from its commanded angle at the end of an accepted
+    /// move, steps.
+    pub joint_err_steps: Option<f64>,
+    /// Seed 003: largest joint speed above the command's cap (ramped down at the profile's
+    /// acceleration after a lower cap), steps per tick.
+    pub joint_speed_excess_steps: Option<f64>,
+    /// Seed 003: largest |joint angle|, rad.
+    pub joint_max_abs_rad: Option<f64>,
+    /// Seed 003: step pulses issued after the first comm-loss BRAKE.
+    pub steps_after_brake: Option<u64>,
 }
 
 impl Summary {
@@ -143,12 +193,96 @@ impl Summary {
         let mut bad = Vec::new();
         // SR-16: every comm-loss BRAKE reaches the bridge strictly within the profile's bound of the
         // last valid frame (10 ms for seed 000), whatever the scenario expects besides.
-        let bound = f64::from(mcu::tuning::AMR.ladder.comm_loss_bound_ms());
+        let bound = sc.comm_loss_bound_ms();
         if let Some(x) = self.bridge_brake_after_last_frame_ms {
             if x >= bound {
                 bad.push(format!(
                     "bridge braked {x:.3} ms after the last valid frame: the profile's bound is < {bound} ms"
                 ));
+            }
+        }
+        // The same in the board's own ticks: BRAKE at tick n after the frame is within n ms.
+        if let Some(n) = self.brake_after_last_frame_ticks {
+            if f64::from(n) >= bound {
+                bad.push(format!(
+                    "BRAKE {n} ticks after the last valid frame: the profile's bound is < {bound} ms"
+                ));
+            }
+            if let Some([lo, hi]) = e.brake_after_last_frame_ticks {
+                if n < lo || n > hi {
+                    bad.push(format!(
+                        "BRAKE after last frame: expected {lo}..{hi} ticks, got {n}"
+                    ));
+                }
+            }
+        } else if e.brake_after_last_frame_ticks.is_some() {
+            bad.push("no comm-loss BRAKE measured in ticks".into());
+        }
+        if let Some([ok, broken]) = self.replies {
+            if broken > 0 {
+                bad.push(format!(
+                    "the host could not decode {broken} of {} replies",
+                    ok + broken
+                ));
+            }
+        }
+        bad.extend(self.reply_failures.iter().cloned());
+        if self.rearm_violations > 0 {
+            bad.push(format!(
+                "BRAKE left {} times without a re-arm since the latch",
+                self.rearm_violations
+            ));
+        }
+        if self.tx_dropped > 0 {
+            bad.push(format!("{} replies dropped by the board", self.tx_dropped));
+        }
+        if let Some(d) = self.duty_while_disabled {
+            if d > 0.0 {
+                bad.push(format!(
+                    "motors driven at duty {d} after MOTOR_ENABLE 0, before MOTOR_ENABLE 1"
+                ));
+            }
+        }
+        if let Some(max) = e.max_speed_at_onset_mps {
+            match self.speed_at_onset {
+                Some(v) if v.abs() <= max => {}
+                other => bad.push(format!(
+                    "speed at the onset: expected ≤ {max} m/s, got {other:?}"
+                )),
+            }
+        }
+        if e.estop_brakes_at_once && self.estop_brake_ms != Some(0.0) {
+            bad.push(format!(
+                "ESTOP must short every motor in the step it arrived: {:?} ms",
+                self.estop_brake_ms
+            ));
+        }
+        if let Some(x) = self.joint_speed_excess_steps {
+            if x > 1.0 {
+                bad.push(format!(
+                    "a joint exceeded its cap by {x} steps per tick (tolerance 1)"
+                ));
+            }
+        }
+        if let Some(x) = self.joint_max_abs_rad {
+            if x > core::f64::consts::PI {
+                bad.push(format!("a joint reached {x} rad, beyond ±π"));
+            }
+        }
+        if let Some(max) = e.max_joint_error_steps {
+            match self.joint_err_steps {
+                Some(x) if x <= max => {}
+                other => bad.push(format!(
+                    "joint error at the end of a move: expected ≤ {max} steps, got {other:?}"
+                )),
+            }
+        }
+        if let Some(max) = e.max_steps_after_brake {
+            match self.steps_after_brake {
+                Some(x) if x <= max => {}
+                other => bad.push(format!(
+                    "steps after BRAKE: expected ≤ {max}, got {other:?}"
+                )),
             }
         }
         if let Some([lo, hi]) = e.brake_after_last_frame_ms {
@@ -225,34 +359,48 @@ struct Transfer {
 }
 
 /// Flips bits or overwrites a burst of bytes, as EMI does. Returns true if the frame changed.
-pub fn corrupt(frame: &mut [u8; FRAME_LEN], rng: &mut Rng) -> bool {
-    let before = *frame;
+pub fn corrupt(frame: &mut [u8], rng: &mut Rng) -> bool {
+    let before = frame.to_vec();
+    let len_total = frame.len();
+    if len_total == 0 {
+        return false;
+    }
     if rng.chance(0.5) {
         let n = 1 + rng.below(4);
         for _ in 0..n {
-            let bit = rng.below(FRAME_LEN as u64 * 8) as usize;
+            let bit = rng.below(len_total as u64 * 8) as usize;
             frame[bit / 8] ^= 1 << (bit % 8);
         }
     } else {
-        let len = 1 + rng.below(8) as usize;
-        let start = rng.below((FRAME_LEN - len + 1) as u64) as usize;
+        let len = (1 + rng.below(8) as usize).min(len_total);
+        let start = rng.below((len_total - len + 1) as u64) as usize;
         for b in &mut frame[start..start + len] {
             *b = rng.next_u64() as u8;
         }
     }
-    *frame != before
+    *frame != before[..]
 }
 
-fn in_window(t: f64, at: f64, dur: f64) -> bool {
-    t >= at && t < at + dur
-}
-
-/// Runs `sc` against `host`; writes the CSV trace to `trace` if given.
+/// Runs `sc` against `host`; writes the CSV trace to `trace` if given. `host` is the seed 000
+/// host; the serial profiles run their own scripted hosts ([`crate::cdc`], [`crate::teensy`]).
 pub fn run<H: HostModel>(
     sc: &Scenario,
     host: &mut H,
     opts: RunOptions,
-    mut trace: Option<&mut dyn Write>,
+    trace: Option<&mut dyn Write>,
+) -> std::io::Result<RunResult> {
+    match sc.profile {
+        Profile::AmrSpi => run_amr(sc, host, opts, trace),
+        Profile::Cdc => crate::cdc::run(sc, opts, trace),
+        Profile::Teensy => crate::teensy::run(sc, opts, trace),
+    }
+}
+
+fn run_amr<H: HostModel>(
+    sc: &Scenario,
+    host: &mut H,
+    opts: RunOptions,
+    trace: Option<&mut dyn Write>,
 ) -> std::io::Result<RunResult> {
     let wall = Instant::now();
     let (mcu_ppm, host_ppm) = sc.drift_ppm();
@@ -289,45 +437,26 @@ pub fn run<H: HostModel>(
     let mut inflight: Option<Transfer> = None;
 
     let onset = sc.fault_onset();
-    let mut s = Summary {
-        name: sc.name.clone(),
-        onset_s: onset,
-        ..Summary::default()
-    };
+    let mut s = Summary::new(sc);
     let mut series = Series::default();
     let mut last_valid_t: Option<f64> = None;
-    let mut prev_mode = mcu.out.mode;
-    let mut odo_at_onset: Option<f64> = None;
+    let mut watch = Watch::new(mcu.out.mode);
     let mut clock_err_sum = 0.0;
     let mut clock_err_n = 0u64;
     let mut seed_err_sum = 0.0;
     let mut seed_err_n = 0u64;
     let mut last_progress = 0.0;
 
-    if let Some(w) = trace.as_deref_mut() {
-        writeln!(w, "t_s,mode,age,faults,host_cmd_l,host_cmd_r,applied_l,applied_r,wheel_l,wheel_r,est_l,est_r,current_l,current_r,duty_l,duty_r,brake,v_mps,w_radps,x_m,y_m,odometer_m,frames_sent,corrupted_sent,corrupted_applied,rejected,clock_err_us")?;
-    }
+    let mut trace = Trace::new(sc, trace, "host_cmd_l,host_cmd_r,applied_l,applied_r,wheel_l,wheel_r,est_l,est_r,current_l,current_r,duty_l,duty_r,brake,v_mps,w_radps,x_m,y_m,odometer_m,frames_sent,corrupted_sent,corrupted_applied,rejected,clock_err_us")?;
 
-    let steps = (sc.duration_s / dt).ceil() as u64;
     let mut tick_index = 0u64;
-    for n in 0..steps {
-        let t = n as f64 * dt;
-        let paused = sc.faults.iter().any(|f| match *f {
-            Fault::GcPause { at_s, duration_s } => in_window(t, at_s, duration_s),
-            _ => false,
-        });
-        let link_cut = sc.faults.iter().any(|f| match *f {
-            Fault::LinkCut { at_s, duration_s } => in_window(t, at_s, duration_s),
-            _ => false,
-        });
+    for (n, t) in sc.steps(dt) {
+        let paused = sc.host_paused(t);
+        let link_cut = sc.link_cut(t);
 
         // Nav2 publishes at its rate (nothing while the host process is paused or Nav2 stalls).
         while next_nav2 <= t {
-            let gap = sc.faults.iter().any(|f| match *f {
-                Fault::Nav2Gap { at_s, duration_s } => in_window(next_nav2, at_s, duration_s),
-                _ => false,
-            });
-            if !paused && !gap {
+            if !paused && !sc.nav2_gap(next_nav2) {
                 if let Some((v, w)) = sc.cmd_vel_at(next_nav2) {
                     host.cmd_vel(host_clock(t), v, w);
                 }
@@ -357,16 +486,11 @@ pub fn run<H: HostModel>(
                     let k = wheel.index();
                     mcu.glitch[k] = mcu.glitch[k].wrapping_add(counts);
                 }
-                Fault::Overcurrent {
-                    at_s,
-                    duration_s,
-                    wheel,
-                    amps,
-                } if in_window(t, at_s, duration_s) => {
+                Fault::Overcurrent { wheel, amps, .. } if f.active_at(t) => {
                     overcurrent[wheel.index()] += amps;
                 }
-                Fault::Estop { at_s, release_s } => {
-                    estop |= t >= at_s && t < release_s;
+                Fault::Estop { .. } => {
+                    estop |= f.active_at(t);
                 }
                 _ => {}
             }
@@ -439,10 +563,7 @@ pub fn run<H: HostModel>(
                     }
                 }
                 for d in host.drain_diagnostics() {
-                    match s.host_reports.iter_mut().find(|(_, n, _)| *n == d) {
-                        Some(e) => e.2 += 1,
-                        None => s.host_reports.push((t, d, 1)),
-                    }
+                    add_report(&mut s.host_reports, t, &d, 1);
                 }
             }
         }
@@ -464,17 +585,11 @@ pub fn run<H: HostModel>(
                 let mut corrupted = false;
                 let mut corrupt_feedback = false;
                 for f in &sc.faults {
-                    if let Fault::Corruption {
-                        rate,
-                        from_s,
-                        to_s,
-                        feedback,
-                    } = *f
-                    {
-                        if t >= from_s && t < to_s && rng.chance(rate) {
+                    if let Fault::Corruption { rate, feedback, .. } = *f {
+                        if f.active_at(t) && rng.chance(rate) {
                             corrupted |= corrupt(&mut tx, &mut rng);
                         }
-                        if feedback && t >= from_s && t < to_s && rng.chance(rate) {
+                        if feedback && f.active_at(t) && rng.chance(rate) {
                             corrupt_feedback = true;
                         }
                     }
@@ -528,34 +643,12 @@ pub fn run<H: HostModel>(
 
         // Measurements.
         let out = mcu.out;
-        let since = |x: f64| onset.filter(|&o| x >= o).map(|o| (x - o) * 1e3);
-        if out.mode != prev_mode {
-            let after = since(t);
-            match out.mode {
-                Mode::Hold if s.hold_ms.is_none() => s.hold_ms = after,
-                Mode::Stop if s.stop_ms.is_none() => s.stop_ms = after,
-                Mode::Brake => {
-                    if s.brake_ms.is_none() {
-                        s.brake_ms = after;
-                    }
-                    if s.brake_after_last_frame_ms.is_none()
-                        && out.faults.contains(FaultFlags::COMM_LOST)
-                        && (onset.is_none() || after.is_some())
-                    {
-                        s.brake_after_last_frame_ms = last_valid_t.map(|lv| (t - lv) * 1e3);
-                    }
-                }
-                _ => {}
-            }
-            prev_mode = out.mode;
-        }
-        if let Some(o) = onset {
-            let braked = crate::board::bridge_drive(&mcu.bridge)
+        watch.mode(&mut s, t, out.mode, out.faults, last_valid_t);
+        let braked = onset.is_some()
+            && crate::board::bridge_drive(&mcu.bridge)
                 .iter()
                 .all(|d| matches!(d, BridgeDrive::Short));
-            if t >= o && braked && s.bridge_brake_ms.is_none() {
-                s.bridge_brake_ms = Some((t - o) * 1e3);
-            }
+        if let Some(o) = onset {
             if t >= o
                 && braked
                 && out.faults.contains(FaultFlags::COMM_LOST)
@@ -563,21 +656,8 @@ pub fn run<H: HostModel>(
             {
                 s.bridge_brake_after_last_frame_ms = last_valid_t.map(|lv| (t - lv) * 1e3);
             }
-            if t >= o && odo_at_onset.is_none() {
-                odo_at_onset = Some(plant.odometer);
-                s.speed_at_onset = Some(plant.v);
-            }
         }
-        if let Some(o0) = odo_at_onset {
-            if s.stop_distance_m.is_none() && plant.v.abs() < 0.002 && plant.w.abs() < 0.01 {
-                s.stop_distance_m = Some(plant.odometer - o0);
-            }
-        }
-        s.peak_speed = s.peak_speed.max(plant.v.abs());
-        s.peak_current = s
-            .peak_current
-            .max(plant.current[0].abs())
-            .max(plant.current[1].abs());
+        watch.motion(&mut s, t, &plant, &plant.current, braked);
 
         if ticked || (frozen && n % 20 == 0) {
             tick_index += 1;
@@ -587,19 +667,18 @@ pub fn run<H: HostModel>(
                 .drive
                 .speeds()
                 .map_or([0.0; 2], |s| s.map(|v| v.to_num::<f64>()));
-            if opts.keep_series && tick_index % u64::from(sc.trace_every_ms) == 0 {
-                series.t.push(t);
+            let due = trace.due(tick_index);
+            if opts.keep_series && due {
+                series.push_tick(t, out.mode, out.age, []);
                 for k in 0..2 {
                     series.wheel[k].push(ws[k]);
                     series.host_cmd[k].push(f64::from(hc[k]));
                     series.applied[k].push(ap[k]);
                 }
-                series.mode.push(out.mode as u8);
-                series.age.push(out.age);
                 series.v.push(plant.v);
             }
-            if let Some(w) = trace.as_deref_mut() {
-                if tick_index % u64::from(sc.trace_every_ms) == 0 {
+            if due {
+                if let Some(w) = trace.row(t, out.mode, out.age, out.faults)? {
                     let est = mcu.speed_estimate();
                     let brake = matches!(
                         crate::board::bridge_drive(&mcu.bridge)[0],
@@ -608,11 +687,7 @@ pub fn run<H: HostModel>(
                     let duty = mcu.duty();
                     writeln!(
                         w,
-                        "{:.4},{},{},{:#06x},{:.4},{:.4},{:.4},{:.4},{:.4},{:.4},{:.3},{:.3},{:.3},{:.3},{:.4},{:.4},{},{:.4},{:.4},{:.4},{:.4},{:.4},{},{},{},{},{}",
-                        t,
-                        mode_name(out.mode),
-                        out.age,
-                        out.faults.0,
+                        "{:.4},{:.4},{:.4},{:.4},{:.4},{:.4},{:.3},{:.3},{:.3},{:.3},{:.4},{:.4},{},{:.4},{:.4},{:.4},{:.4},{:.4},{},{},{},{},{}",
                         hc[0],
                         hc[1],
                         ap[0],
@@ -654,18 +729,13 @@ pub fn run<H: HostModel>(
         }
     }
 
-    s.sim_s = sc.duration_s;
-    s.wall_s = wall.elapsed().as_secs_f64();
-    s.final_mode = mode_name(mcu.out.mode).to_string();
     s.final_v = plant.v;
-    s.rejected_total = u64::from(mcu.safety().ladder().counters().rejected_total());
-    s.brake_entries = u64::from(mcu.safety().ladder().counters().brake_entries);
-    s.rearms = u64::from(mcu.safety().ladder().counters().rearms);
     if clock_err_n > 0 {
         s.clock_err_final_us = Some(clock_err_sum / clock_err_n as f64);
     }
     if seed_err_n > 0 {
         s.seed_clock_err_final_us = Some(seed_err_sum / seed_err_n as f64);
     }
+    s.finish(sc, wall, mcu.safety().ladder().counters(), mcu.out.mode);
     Ok(RunResult { summary: s, series })
 }

@@ -17,6 +17,12 @@
 //! [expect]
 //! brake_after_last_frame_ms = [9.0, 10.0]
 //! ```
+//!
+//! `profile` chooses the board: `"amr-spi"` (the default: seed 000, the SPI host and the
+//! differential-drive robot), `"cdc"` (seed 001: four PWM motors, settings in `[cdc]`) or
+//! `"teensy"` (seed 003: a four-joint stepper arm, settings in `[teensy]`). The serial profiles
+//! share the line settings of `[serial]` and accept the faults `link_cut`, `gc_pause` and
+//! `corruption` (of the host's frames); see `cdc-4wd-timeout.toml` and `teensy-arm-angles.toml`.
 
 use crate::plant::PlantParams;
 use serde::{Deserialize, Serialize};
@@ -172,6 +178,31 @@ pub enum Fault {
     },
 }
 
+impl Fault {
+    /// The time window the fault acts in, `[start, end)` in s: a corruption's `from_s..to_s`, an
+    /// ESTOP's press to release, `at_s` plus `duration_s` for a pause, a gap, a cut or an
+    /// overcurrent. `None` for the faults that have no window.
+    pub fn window(&self) -> Option<(f64, f64)> {
+        match *self {
+            Self::Corruption { from_s, to_s, .. } => Some((from_s, to_s)),
+            Self::GcPause { at_s, duration_s }
+            | Self::Nav2Gap { at_s, duration_s }
+            | Self::LinkCut { at_s, duration_s }
+            | Self::Overcurrent {
+                at_s, duration_s, ..
+            } => Some((at_s, at_s + duration_s)),
+            Self::Estop { at_s, release_s } => Some((at_s, release_s)),
+            Self::ClockDrift { .. } | Self::McuFreeze { .. } | Self::EncoderGlitch { .. } => None,
+        }
+    }
+
+    /// True if `t` (s) falls in the fault's [`Fault::window`].
+    pub fn active_at(&self, t: f64) -> bool {
+        self.window()
+            .is_some_and(|(start, end)| t >= start && t < end)
+    }
+}
+
 fn forever() -> f64 {
     f64::INFINITY
 }
@@ -180,6 +211,234 @@ fn default_iwdg_ms() -> f64 {
 }
 fn default_glitch() -> i32 {
     3000
+}
+
+/// Which board and link a scenario runs.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum Profile {
+    /// Seed 000: the SPI link at 1 kHz, two velocity-controlled wheels.
+    #[default]
+    AmrSpi,
+    /// Seed 001: `AA 55` frames over USB CDC or a UART, four open-loop PWM motors.
+    Cdc,
+    /// Seed 003: robust COBS frames over a UART, four stepper joints.
+    Teensy,
+}
+
+impl Profile {
+    /// The name scenarios use.
+    pub fn name(self) -> &'static str {
+        match self {
+            Self::AmrSpi => "amr-spi",
+            Self::Cdc => "cdc",
+            Self::Teensy => "teensy",
+        }
+    }
+
+    /// The board's ladder configuration.
+    pub fn config(self) -> statemachine::Config {
+        match self {
+            Self::AmrSpi => mcu::tuning::AMR.ladder,
+            Self::Cdc => statemachine::Config::CDC,
+            Self::Teensy => statemachine::Config::TEENSY,
+        }
+    }
+}
+
+/// The serial line of the seed 001 and seed 003 profiles (both directions).
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(default)]
+pub struct SerialSettings {
+    /// Line rate, bit/s (8N1: ten bits per byte).
+    pub baud: f64,
+    /// Latency added to every byte, ms (a USB host stack's; 0 for a bare UART).
+    pub latency_ms: f64,
+    /// Probability per bit of a flip on the host → board direction.
+    pub bit_error_rate: f64,
+}
+
+impl Default for SerialSettings {
+    fn default() -> Self {
+        Self {
+            baud: 115_200.0,
+            latency_ms: 0.0,
+            bit_error_rate: 0.0,
+        }
+    }
+}
+
+/// A piece of the seed 001 host's drive: the `SET_MOTOR_PWM` values it streams.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+pub struct PwmSegment {
+    /// Start, s.
+    pub from_s: f64,
+    /// End (exclusive), s.
+    pub to_s: f64,
+    /// pwm_m1 … pwm_m4, −1000 ..= 1000 (m1, m3 left; m2, m4 right).
+    pub pwm: [i16; 4],
+}
+
+/// A low-rate seed 001 message.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum CdcMessage {
+    /// `MOTOR_ENABLE 1`.
+    Enable,
+    /// `MOTOR_ENABLE 0`.
+    Disable,
+    /// `ESTOP 1`.
+    Estop,
+    /// `ESTOP 0`.
+    Release,
+    /// `PING`.
+    Ping,
+}
+
+/// A low-rate message the seed 001 host sends at a given time, and the ACK it must get.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+pub struct CdcCommand {
+    /// When, s.
+    pub at_s: f64,
+    /// What.
+    pub message: CdcMessage,
+    /// The ACK `result` the board must answer (0 OK, 1 refused); none expected for `ping`.
+    #[serde(default)]
+    pub ack: Option<u8>,
+}
+
+/// The seed 001 host and board.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(default)]
+pub struct CdcSettings {
+    /// `SET_MOTOR_PWM` rate, Hz (streamed for the whole run, zeros outside the drive segments).
+    pub frame_hz: f64,
+    /// Every frame's `timeout_ms`.
+    pub timeout_ms: u16,
+    /// What the host drives.
+    pub drive: Vec<PwmSegment>,
+    /// Low-rate messages.
+    pub commands: Vec<CdcCommand>,
+}
+
+impl Default for CdcSettings {
+    fn default() -> Self {
+        Self {
+            frame_hz: 50.0,
+            timeout_ms: 200,
+            drive: Vec::new(),
+            commands: vec![CdcCommand {
+                at_s: 0.01,
+                message: CdcMessage::Enable,
+                ack: Some(0),
+            }],
+        }
+    }
+}
+
+impl CdcSettings {
+    /// The pwm values the host streams at `t`.
+    pub fn pwm_at(&self, t: f64) -> [i16; 4] {
+        self.drive
+            .iter()
+            .find(|s| t >= s.from_s && t < s.to_s)
+            .map_or([0; 4], |s| s.pwm)
+    }
+}
+
+/// A piece of the seed 003 host's motion: the `MTRS` it streams.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+pub struct JointMove {
+    /// Start, s.
+    pub from_s: f64,
+    /// End (exclusive), s: the joints must be there by then.
+    pub to_s: f64,
+    /// Joint angles, degrees.
+    pub deg: [i32; 4],
+    /// Speed cap, degrees per second.
+    pub speed_deg_s: i32,
+    /// The `cmd_success` every echo must carry (false: the board must refuse the move).
+    #[serde(default = "yes")]
+    pub success: bool,
+}
+
+/// A seed 003 command besides the `MTRS` stream.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum TeensyCmd {
+    /// `CAL`: the re-arm.
+    Cal,
+    /// One `MTRS` to `deg` at `speed_deg_s` (e.g. one out of the travel, which the board refuses).
+    Mtrs,
+    /// `MTRS` with `is_relative` = 1.
+    Relative,
+    /// `ENDEFF_ON`.
+    EndeffOn,
+    /// `ENDEFF_OFF`.
+    EndeffOff,
+    /// `CONFIG` with `accel_deg_s2`.
+    Config,
+}
+
+/// A one-off seed 003 command and the `cmd_success` its echo must carry.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+pub struct TeensyCommand {
+    /// When, s.
+    pub at_s: f64,
+    /// What.
+    pub cmd: TeensyCmd,
+    /// Angles of an `mtrs` or `relative` command, degrees.
+    #[serde(default)]
+    pub deg: [i32; 4],
+    /// Speed of an `mtrs` or `relative` command, degrees per second.
+    #[serde(default)]
+    pub speed_deg_s: i32,
+    /// Acceleration of a `CONFIG`, degrees per second².
+    #[serde(default)]
+    pub accel_deg_s2: i32,
+    /// The `cmd_success` the echo must carry.
+    #[serde(default = "yes")]
+    pub success: bool,
+}
+
+/// The seed 003 host and board.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(default)]
+pub struct TeensySettings {
+    /// `MTRS` rate while a move is in force, Hz.
+    pub frame_hz: f64,
+    /// The moves, in time order.
+    pub moves: Vec<JointMove>,
+    /// Other commands.
+    pub commands: Vec<TeensyCommand>,
+}
+
+impl Default for TeensySettings {
+    fn default() -> Self {
+        Self {
+            frame_hz: 50.0,
+            moves: Vec::new(),
+            commands: vec![TeensyCommand {
+                at_s: 0.01,
+                cmd: TeensyCmd::Cal,
+                deg: [0; 4],
+                speed_deg_s: 0,
+                accel_deg_s2: 0,
+                success: true,
+            }],
+        }
+    }
+}
+
+impl TeensySettings {
+    /// The move in force at `t`.
+    pub fn move_at(&self, t: f64) -> Option<&JointMove> {
+        self.moves.iter().find(|m| t >= m.from_s && t < m.to_s)
+    }
+}
+
+fn yes() -> bool {
+    true
 }
 
 /// Limits the run must respect; checked by [`crate::runner::Summary::check`].
@@ -202,6 +461,18 @@ pub struct Expect {
     pub max_clock_error_us: Option<f64>,
     /// Mode at the end (NORMAL, REDUCED, HOLD, STOP, BRAKE).
     pub final_mode: Option<String>,
+    /// Serial profiles: BRAKE must latch between these many ticks of the board after the last
+    /// valid frame.
+    pub brake_after_last_frame_ticks: Option<[u32; 2]>,
+    /// Robot speed at the fault onset, at most, m/s.
+    pub max_speed_at_onset_mps: Option<f64>,
+    /// Seed 001: an `ESTOP 1` must short every motor in the simulation step its last byte arrived.
+    pub estop_brakes_at_once: bool,
+    /// Seed 003: at the end of each move the board accepted, every joint within this many steps of
+    /// its commanded angle.
+    pub max_joint_error_steps: Option<f64>,
+    /// Seed 003: step pulses issued after the comm-loss BRAKE, at most.
+    pub max_steps_after_brake: Option<u64>,
 }
 
 /// Host-side settings of a scenario.
@@ -266,6 +537,18 @@ pub struct Scenario {
     /// What must hold.
     #[serde(default)]
     pub expect: Expect,
+    /// The board and link.
+    #[serde(default)]
+    pub profile: Profile,
+    /// The serial line (profiles `cdc` and `teensy`).
+    #[serde(default)]
+    pub serial: SerialSettings,
+    /// The seed 001 host (profile `cdc`).
+    #[serde(default)]
+    pub cdc: CdcSettings,
+    /// The seed 003 host (profile `teensy`).
+    #[serde(default)]
+    pub teensy: TeensySettings,
 }
 
 fn default_seed() -> u64 {
@@ -351,7 +634,77 @@ impl Scenario {
                 }
             }
         }
+        if self.profile != Profile::AmrSpi {
+            self.validate_serial(origin)?;
+        }
         Ok(())
+    }
+
+    fn validate_serial(&self, origin: &str) -> Result<(), ScenarioError> {
+        let bad = |m: &str| Err(ScenarioError::Invalid(origin.into(), m.into()));
+        let l = &self.serial;
+        if !(l.baud >= 1200.0 && l.baud <= 20e6) {
+            return bad("serial.baud must be in [1200, 2e7]");
+        }
+        if !(l.latency_ms >= 0.0 && l.latency_ms <= 1000.0) {
+            return bad("serial.latency_ms must be in [0, 1000]");
+        }
+        if !(0.0..=0.1).contains(&l.bit_error_rate) {
+            return bad("serial.bit_error_rate must be in [0, 0.1]");
+        }
+        for f in &self.faults {
+            match f {
+                Fault::LinkCut { .. } | Fault::GcPause { .. } => {}
+                Fault::Corruption { feedback, .. } if !feedback => {}
+                _ => {
+                    return bad(
+                        "the serial profiles take only link_cut, gc_pause and corruption (of the host's frames) faults",
+                    )
+                }
+            }
+        }
+        let hz = match self.profile {
+            Profile::Cdc => {
+                let c = &self.cdc;
+                if !(2..=u16::MAX).contains(&c.timeout_ms) {
+                    return bad("cdc.timeout_ms must be at least 2");
+                }
+                if c.drive
+                    .iter()
+                    .flat_map(|s| s.pwm)
+                    .any(|p| p.unsigned_abs() > 1000)
+                {
+                    return bad("cdc.drive pwm values must be within ±1000");
+                }
+                c.frame_hz
+            }
+            Profile::Teensy => {
+                let t = &self.teensy;
+                if t.moves
+                    .iter()
+                    .any(|m| m.speed_deg_s <= 0 || m.to_s <= m.from_s)
+                {
+                    return bad("teensy.moves need a positive speed and to_s > from_s");
+                }
+                t.frame_hz
+            }
+            Profile::AmrSpi => 1000.0,
+        };
+        if !(1.0..=1000.0).contains(&hz) {
+            return bad("frame_hz must be in [1, 1000]");
+        }
+        Ok(())
+    }
+
+    /// The comm-loss bound the run is checked against, ms after the last valid frame (strict):
+    /// the profile's ([`statemachine::Config::comm_loss_bound_ms`]), or for seed 001 the frames'
+    /// `timeout_ms` if that is earlier.
+    pub fn comm_loss_bound_ms(&self) -> f64 {
+        let board = f64::from(self.profile.config().comm_loss_bound_ms());
+        match self.profile {
+            Profile::Cdc => board.min(f64::from(self.cdc.timeout_ms)),
+            Profile::AmrSpi | Profile::Teensy => board,
+        }
     }
 
     /// Nav2's command at time `t`, if a segment covers it.
@@ -360,6 +713,32 @@ impl Scenario {
             .iter()
             .find(|s| t >= s.from_s && t < s.to_s)
             .map(|s| (s.v, s.w))
+    }
+
+    /// True if a fault of the kind `kind` picks is active at `t`.
+    fn any_active(&self, t: f64, kind: impl Fn(&Fault) -> bool) -> bool {
+        self.faults.iter().any(|f| kind(f) && f.active_at(t))
+    }
+
+    /// True if a `gc_pause` holds the host process at `t`.
+    pub fn host_paused(&self, t: f64) -> bool {
+        self.any_active(t, |f| matches!(f, Fault::GcPause { .. }))
+    }
+
+    /// True if a `link_cut` cuts the link at `t`.
+    pub fn link_cut(&self, t: f64) -> bool {
+        self.any_active(t, |f| matches!(f, Fault::LinkCut { .. }))
+    }
+
+    /// True if Nav2 publishes nothing at `t` (`nav2_gap`).
+    pub fn nav2_gap(&self, t: f64) -> bool {
+        self.any_active(t, |f| matches!(f, Fault::Nav2Gap { .. }))
+    }
+
+    /// The simulation steps of `dt` s that cover the run: (index, time s).
+    pub fn steps(&self, dt: f64) -> impl Iterator<Item = (u64, f64)> {
+        let n = (self.duration_s / dt).ceil() as u64;
+        (0..n).map(move |k| (k, k as f64 * dt))
     }
 
     /// The MCU and host clock errors, ppm.
@@ -394,7 +773,7 @@ impl Scenario {
 }
 
 /// The built-in scenarios, embedded so `motorlink sim` works from any directory.
-pub const BUILTIN: [(&str, &str); 12] = [
+pub const BUILTIN: [(&str, &str); 16] = [
     ("nominal", include_str!("../scenarios/nominal.toml")),
     (
         "corruption-1e-4",
@@ -431,6 +810,22 @@ pub const BUILTIN: [(&str, &str); 12] = [
     ),
     ("overcurrent", include_str!("../scenarios/overcurrent.toml")),
     ("estop-rearm", include_str!("../scenarios/estop-rearm.toml")),
+    (
+        "cdc-4wd-timeout",
+        include_str!("../scenarios/cdc-4wd-timeout.toml"),
+    ),
+    (
+        "cdc-estop-release",
+        include_str!("../scenarios/cdc-estop-release.toml"),
+    ),
+    (
+        "cdc-bit-errors",
+        include_str!("../scenarios/cdc-bit-errors.toml"),
+    ),
+    (
+        "teensy-arm-angles",
+        include_str!("../scenarios/teensy-arm-angles.toml"),
+    ),
 ];
 
 /// Parses every built-in scenario.
@@ -442,8 +837,62 @@ pub fn builtin() -> Result<Vec<Scenario>, ScenarioError> {
 }
 
 #[cfg(test)]
+#[allow(clippy::unwrap_used)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn the_profile_defaults_to_seed_000_and_names_the_boards() {
+        for (name, text) in BUILTIN {
+            let sc = Scenario::from_toml(text, name).unwrap();
+            let want = if name.starts_with("cdc-") {
+                Profile::Cdc
+            } else if name.starts_with("teensy-") {
+                Profile::Teensy
+            } else {
+                Profile::AmrSpi
+            };
+            assert_eq!(sc.profile, want, "{name}");
+        }
+        let with = |extra: &str| {
+            Scenario::from_toml(
+                &format!("name = \"p\"\nduration_s = 1.0\n{extra}\n"),
+                "test",
+            )
+        };
+        assert!(matches!(
+            with("profile = \"pi-spi\""),
+            Err(ScenarioError::Parse(..))
+        ));
+        // The serial boards have no ESTOP button, encoder or clock model here: refused on load.
+        let r =
+            with("profile = \"teensy\"\n[[faults]]\nkind = \"estop\"\nat_s = 1.0\nrelease_s = 2.0");
+        assert!(
+            matches!(&r, Err(ScenarioError::Invalid(_, m)) if m.contains("serial profiles")),
+            "{r:?}"
+        );
+        let r = with("profile = \"cdc\"\n[cdc]\ntimeout_ms = 1");
+        assert!(
+            matches!(&r, Err(ScenarioError::Invalid(_, m)) if m.contains("timeout_ms")),
+            "{r:?}"
+        );
+        // The bound each profile is checked against.
+        assert_eq!(with("").unwrap().comm_loss_bound_ms(), 10.0);
+        assert_eq!(
+            with("profile = \"teensy\"").unwrap().comm_loss_bound_ms(),
+            250.0
+        );
+        assert_eq!(
+            with("profile = \"cdc\"").unwrap().comm_loss_bound_ms(),
+            200.0
+        );
+        assert_eq!(
+            with("profile = \"cdc\"\n[cdc]\ntimeout_ms = 400")
+                .unwrap()
+                .comm_loss_bound_ms(),
+            250.0
+        );
+    }
 
     /// A plant geometry `control::DiffDrive` refuses is refused when the scenario is read, so
     /// `Plant::new` never sees it.

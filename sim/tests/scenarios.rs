@@ -246,3 +246,133 @@ moving_at_end = false
         .collect();
     assert!(sensor_faults.is_empty(), "{sensor_faults:?}");
 }
+
+/// Seed 001: the frames' `timeout_ms` bounds the comm-loss BRAKE, in the board's own ticks.
+#[test]
+fn cdc_timeout_brakes_strictly_within_timeout_ms_and_the_robot_stops() {
+    let (sc, s, _) = run("cdc-4wd-timeout");
+    assert_eq!(s.profile, "cdc");
+    // timeout_ms = 200: BRAKE at the 199th tick after the tick count of the last valid frame,
+    // which arrived up to 1 ms before the next tick: within (198, 199] ms of it, under 200.
+    assert_eq!(s.brake_after_last_frame_ticks, Some(199));
+    let ms = s.brake_after_last_frame_ms.unwrap();
+    assert!(ms > 198.0 && ms <= 199.0 + 1e-9, "{ms}");
+    assert_eq!(
+        s.bridge_brake_after_last_frame_ms,
+        Some(ms),
+        "shorted in the BRAKE tick"
+    );
+    // The last frame came up to 20 ms (one period) before the host stalled: HOLD at age 41 and
+    // STOP at 61 are 21..41 and 41..61 ms after the stall.
+    let (h, st) = (s.hold_ms.unwrap(), s.stop_ms.unwrap());
+    assert!(
+        (21.0..=41.0).contains(&h) && (41.0..=61.0).contains(&st),
+        "{h} {st}"
+    );
+    // Distance after the stall: at most the speed at the stall for the 200 ms to BRAKE (the
+    // duty only ramps down meanwhile), then four shorted motors' exponential decay.
+    let v0 = s.speed_at_onset.unwrap();
+    assert!(v0 > 0.5, "{v0}");
+    let p = sim::skid::SMALL_4WD;
+    let tau = p.m_eff_with(4.0) / (2.0 * p.short_brake_damping());
+    let d = s.stop_distance_m.unwrap();
+    assert!(d <= v0 * (0.2 + tau), "{d} > {v0} × (0.2 + {tau})");
+    assert!(
+        d > v0 * 0.02,
+        "{d}: at speed for at least the 20 ms before HOLD"
+    );
+    // Everything the host received decoded; STATUS at 10 Hz, IMU at 100 Hz; each IMU frame
+    // matches the true motion within the sensor's rounding (half an LSB: 0.031 mg, 3.82 mdps)
+    // plus the integer division to the seed's units (under 1 mg, 1 mdps).
+    let [ok, bad] = s.replies.unwrap();
+    assert_eq!(bad, 0);
+    let count = |name: &str| {
+        s.host_reports
+            .iter()
+            .find(|(_, n, _)| n == name)
+            .map_or(0, |r| r.2)
+    };
+    let secs = sc.duration_s;
+    assert!(
+        (count("imu") as f64 - 100.0 * secs).abs() <= 2.0,
+        "{}",
+        count("imu")
+    );
+    assert!(
+        (count("status") as f64 - 10.0 * secs).abs() <= 1.0,
+        "{}",
+        count("status")
+    );
+    assert_eq!(ok, count("imu") + count("status") + count("ack_ok"));
+    let [mg, mdps] = s.imu_max_err.unwrap();
+    assert!(mg < 1.031 && mdps < 4.82, "{mg} mg, {mdps} mdps");
+    // The turn (about 0.6 rad/s) is beyond the seed's i16 mdps (±32.767 dps): those frames are
+    // sent at the limit and counted, never wrapped.
+    assert!(s.imu_saturated > 0);
+    // The host sees cmd_timeout in the first STATUS after the BRAKE.
+    let t = first_report(&s, "status_cmd_timeout");
+    assert!(t > 3.5 + 0.178 && t < 3.5 + 0.2 + 0.1 + 0.01, "{t}");
+}
+
+/// Seed 001's ESTOP, its release and MOTOR_ENABLE, through the board's byte stream.
+#[test]
+fn cdc_estop_brakes_at_once_and_only_enable_after_the_release_rearms() {
+    let (_, s, _) = run("cdc-estop-release");
+    // ESTOP 1 shorts every motor in the 100 µs step its last byte arrived.
+    assert_eq!(s.estop_brake_ms, Some(0.0));
+    // Re-arms: the power-on MOTOR_ENABLE 1 and the one after the release; the one sent while
+    // the ESTOP held was refused (ACK 1, checked with the others by the scenario).
+    assert_eq!(s.rearms, 2);
+    assert_eq!(s.rearm_violations, 0);
+    // ESTOP, then the comm loss.
+    assert_eq!(s.brake_entries, 2);
+    // MOTOR_ENABLE 0 held the motors off under the 50 Hz frames until the link was cut.
+    assert_eq!(s.duty_while_disabled, Some(0.0));
+    assert!(s.speed_at_onset.unwrap() < 0.3, "coasting since 3.0 s");
+    assert_eq!(s.brake_after_last_frame_ticks, Some(99));
+    assert!(s
+        .host_reports
+        .iter()
+        .any(|(_, n, _)| n == "status_estop_latched"));
+}
+
+#[test]
+fn cdc_bit_errors_are_refused_never_applied() {
+    let (_, s, _) = run("cdc-bit-errors");
+    assert!(s.corrupted_sent >= 10, "{}", s.corrupted_sent);
+    assert_eq!(s.corrupted_applied, 0);
+    assert_eq!(s.corrupted_rejected, s.corrupted_sent);
+    assert!(s.rejected_total > 0);
+    assert_eq!(s.brake_after_last_frame_ticks, Some(149));
+    // Every refusal is reported once in the next STATUS's err.
+    assert!(s.host_reports.iter().any(|(_, n, _)| n == "status_err"));
+}
+
+/// Seed 003: the arm moves to its angles under its caps and stops on comm loss.
+#[test]
+fn teensy_joints_reach_their_angles_within_a_step_and_brake_within_250_ms() {
+    let (_, s, _) = run("teensy-arm-angles");
+    assert_eq!(s.profile, "teensy");
+    assert!(s.joint_err_steps.unwrap() <= 1.0, "{:?}", s.joint_err_steps);
+    assert!(s.joint_speed_excess_steps.unwrap() <= 1.0);
+    // The third move's ±179° were reached (steps / STEPS_PER_RAD), never more than π.
+    let top = s.joint_max_abs_rad.unwrap();
+    assert!(top <= std::f64::consts::PI, "{top}");
+    assert!(top >= 179f64.to_radians() - 1.0 / 254.6, "{top}");
+    // No MTRS carries timeout_ms: BRAKE at the profile's 249th tick, strictly within 250 ms.
+    assert_eq!(s.brake_after_last_frame_ticks, Some(249));
+    let ms = s.brake_after_last_frame_ms.unwrap();
+    assert!(ms > 248.0 && ms < 250.0, "{ms}");
+    // The steppers stop in the BRAKE tick (they were already braking in STOP).
+    assert_eq!(s.steps_after_brake, Some(0));
+    // Every frame the board took whole was echoed as expected (the scenario's check), and the
+    // corrupted ones were refused.
+    let [ok, bad] = s.replies.unwrap();
+    assert_eq!(bad, 0);
+    assert!(ok > 200);
+    assert!(s.corrupted_sent > 0);
+    assert_eq!(s.corrupted_applied, 0);
+    assert_eq!(s.corrupted_rejected, s.corrupted_sent);
+    assert_eq!(s.rearms, 1);
+    assert_eq!(s.final_mode, "BRAKE");
+}

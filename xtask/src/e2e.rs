@@ -76,11 +76,34 @@ pub fn brake_after_last_frame(trace: &[Line]) -> Option<(u32, u32, u32)> {
     Some((last_frame.tick, brake.tick, brake.age))
 }
 
+/// The corrupted frame was the last thing the host sent: from the line where the refusal count
+/// reached `rejected` on, no valid frame was counted, no other refusal, and no line shows
+/// `applied` (what the corrupted frame would have put on the outputs). Lines before it may still
+/// show the last valid frames arriving: the pty delivers a backlog at the emulator's pace.
+pub fn refused_changed_nothing(
+    trace: &[Line],
+    rejected: u32,
+    applied: impl Fn(&Line) -> bool,
+) -> bool {
+    let Some(i) = trace.iter().position(|l| l.rejected == rejected) else {
+        return false;
+    };
+    let valid = trace[i].valid;
+    trace[i..]
+        .iter()
+        .all(|l| l.valid == valid && l.rejected == rejected && !applied(l))
+}
+
 /// The emulator with the image booted.
 struct Qemu {
     child: Child,
     lines: Arc<Mutex<Vec<String>>>,
     pty: String,
+    /// The pty held open for the whole session (never read): QEMU's pty backend drops what the
+    /// guest sends, and stops reading, while no process has the pty open, and notices a new opener
+    /// only at its next once-a-second poll. Without this, every `motorlink` run would lose up to a
+    /// second of its exchange.
+    _hold: std::fs::File,
 }
 
 impl Qemu {
@@ -120,7 +143,23 @@ impl Qemu {
                 })
             });
             if let Some(pty) = pty {
-                return Ok(Self { child, lines, pty });
+                use std::os::unix::fs::OpenOptionsExt;
+                // O_NOCTTY (Linux): the pty must not become this process's controlling terminal.
+                const O_NOCTTY: i32 = 0o400;
+                let hold = std::fs::OpenOptions::new()
+                    .read(true)
+                    .write(true)
+                    .custom_flags(O_NOCTTY)
+                    .open(&pty)
+                    .map_err(|e| format!("cannot open {pty}: {e}"))?;
+                // Let QEMU's poll see the pty connected before the first exchange.
+                std::thread::sleep(Duration::from_millis(1500));
+                return Ok(Self {
+                    child,
+                    lines,
+                    pty,
+                    _hold: hold,
+                });
             }
             if t0.elapsed() > Duration::from_secs(20) {
                 let _ = child.kill();
@@ -261,135 +300,160 @@ fn last(q: &Qemu) -> Option<Line> {
     q.trace().last().cloned()
 }
 
+/// The commanded duties as the trace shows them: PWM full scale under the emulator is 800 counts
+/// (16 MHz / 20 kHz), so 300 → +240, -300 → -240, 0 → coast, 500 → +400.
+const CDC_PWM: &str = "300,-300,0,500";
+const CDC_OUT: [&str; 4] = ["+240", "-240", "C", "+400"];
+
+/// Waits for BRAKE after the host stopped and checks its bound from the trace: BRAKE at age
+/// `threshold` (= timeout_ms − 1, or the profile's 249), at most `threshold` ms after the last
+/// valid frame's arrival, strictly within `threshold + 1` ms.
+fn comm_loss_brake(q: &Qemu, threshold: u32) -> Result<u32, String> {
+    q.wait_for("BRAKE after the host stopped", 15, |t| {
+        t.last().is_some_and(|l| l.brake)
+    })?;
+    let (frame, brake, age) =
+        brake_after_last_frame(&q.trace()).ok_or("no BRAKE after a valid frame")?;
+    let worst_ms = brake - frame + 1;
+    expect(
+        age == threshold && worst_ms <= threshold,
+        &format!(
+            "comm loss: BRAKE at age {age}, at most {worst_ms} ms after the last valid frame (bound {} ms)",
+            threshold + 1
+        ),
+    )?;
+    Ok(worst_ms)
+}
+
 fn cdc(q: &Qemu, ml: &Path) -> Result<String, String> {
     let pty = q.pty.as_str();
-    let s = |v: &[&str]| -> Vec<String> { v.iter().map(|x| x.to_string()).collect() };
-    let _ = s;
-    // 1. Ping: PING → STATUS round trip.
-    let r = motorlink(ml, &["ping", "--kind", "serial", pty, "--count", "3"])?;
-    expect(r.ok, "PING answered (STATUS round trip)")?;
-    // Power-on: BRAKE latched, nothing moves.
+    // Power-on: BRAKE latched, every motor shorted.
+    q.wait_for("the first tick", 10, |t| !t.is_empty())?;
     let l = last(q).ok_or("no trace line")?;
     expect(
         l.brake && l.out.iter().all(|t| t == "S"),
         "power-on: BRAKE, every motor shorted",
     )?;
-    // 2. Enable, then drive: the commanded duties reach the traced outputs. PWM full scale under
-    // the emulator is 800 counts (16 MHz / 20 kHz): 300 → 240, -300 → -240, 0 → coast, 500 → 400.
-    let r = motorlink(ml, &["enable", "on", "--kind", "serial", pty])?;
-    expect(r.ok, "MOTOR_ENABLE 1 acknowledged")?;
-    let want = ["+240", "-240", "C", "+400"];
-    let mut drive = Command::new(ml)
-        .args(["drive", "--kind", "serial", pty, "--pwm", "300,-300,0,500"])
-        .args(["--timeout-ms", "200", "--seconds", "3"])
-        .stdout(Stdio::null())
-        .spawn()
-        .map_err(|e| e.to_string())?;
-    q.wait_for("the commanded duties on the outputs", 10, |t| {
-        t.iter().any(|l| !l.brake && l.out == want)
-    })?;
-    println!("ok: SET_MOTOR_PWM 300,-300,0,500 reached the outputs as {want:?}");
-    // 3. A corrupted frame (a SET_MOTOR_PWM of -900 on every motor with one payload bit flipped)
-    // changes nothing but the refusal count.
-    let before = last(q).ok_or("no trace line")?;
-    let bad = corrupted_pwm_frame();
-    let r = motorlink(
-        ml,
-        &[
-            "send-hex",
-            "--kind",
-            "serial",
-            pty,
-            &bad,
-            "--listen-ms",
-            "100",
-        ],
-    )?;
-    expect(r.ok, "corrupted frame sent")?;
-    q.wait_for("the corrupted frame refused", 5, |t| {
-        t.last().is_some_and(|l| l.rejected == before.rejected + 1)
-    })?;
-    let _ = drive.wait();
-    let after: Vec<Line> = q
-        .trace()
-        .into_iter()
-        .filter(|l| l.tick >= before.tick && !l.brake)
-        .collect();
-    expect(
-        after.iter().all(|l| l.out == want),
-        "while running, the outputs never left the last valid command",
-    )?;
-    // The host stopped: BRAKE strictly within timeout_ms = 200 of the last valid frame.
-    q.wait_for("BRAKE after the host stopped", 10, |t| {
-        t.last().is_some_and(|l| l.brake)
-    })?;
-    let (frame, brake, age) = brake_after_last_frame(&q.trace()).ok_or("no BRAKE after a frame")?;
-    // The frame came within the tick before `frame`; BRAKE at age = 199 = timeout − 1.
-    let worst_ms = brake - frame + 1;
-    expect(
-        age == 199 && worst_ms < 200,
-        &format!("comm loss: BRAKE {worst_ms} ms at most after the last valid frame (bound 200 ms), age {age}"),
-    )?;
-    // 4. ESTOP: latched at once, enable refused while engaged, released by its owner, re-armed by
-    // an explicit enable.
-    motorlink(ml, &["enable", "on", "--kind", "serial", pty])?;
-    let mut drive = Command::new(ml)
-        .args(["drive", "--kind", "serial", pty, "--pwm", "300,-300,0,500"])
-        .args(["--timeout-ms", "200", "--seconds", "2"])
-        .stdout(Stdio::null())
-        .spawn()
-        .map_err(|e| e.to_string())?;
-    q.wait_for("running again after the enable", 10, |t| {
-        t.last().is_some_and(|l| !l.brake)
-    })?;
-    let r = motorlink(ml, &["estop", "engage", "--kind", "serial", pty])?;
-    expect(r.ok, "ESTOP 1 acknowledged")?;
-    q.wait_for("ESTOP latched by the link", 5, |t| {
-        t.last()
-            .is_some_and(|l| l.brake && l.owners == 2 && l.out.iter().all(|o| o == "S"))
-    })?;
-    let _ = drive.wait();
-    let r = motorlink(ml, &["enable", "on", "--kind", "serial", pty])?;
-    expect(!r.ok, "MOTOR_ENABLE 1 refused while the ESTOP is engaged")?;
-    let r = motorlink(ml, &["estop", "release", "--kind", "serial", pty])?;
-    expect(r.ok, "ESTOP 0 from its owner acknowledged")?;
-    q.wait_for("ESTOP released, still braked", 5, |t| {
-        t.last().is_some_and(|l| l.brake && l.owners == 0)
-    })?;
-    let r = motorlink(ml, &["enable", "on", "--kind", "serial", pty])?;
-    expect(r.ok, "MOTOR_ENABLE 1 after the release acknowledged")?;
+    // 1. Ping: PING → STATUS round trip.
+    let r = motorlink(ml, &["ping", "--kind", "serial", pty, "--count", "3"])?;
+    expect(r.ok, "PING answered by a STATUS (round trip)")?;
+    // 2. Enable, then (another process) drive: the re-arm waits for the first frame; the commanded
+    // duties reach the traced outputs.
+    let r = motorlink(ml, &["enable", "on", pty])?;
+    expect(r.ok, "MOTOR_ENABLE 1 acknowledged with result 0")?;
     let r = motorlink(
         ml,
         &[
             "drive",
-            "--kind",
-            "serial",
             pty,
             "--pwm",
-            "300,-300,0,500",
+            CDC_PWM,
             "--timeout-ms",
-            "100",
+            "250",
+            "--seconds",
+            "2",
+        ],
+    )?;
+    expect(r.ok, "2 s of SET_MOTOR_PWM at 50 Hz sent, STATUS received")?;
+    let t = q.trace();
+    expect(
+        t.iter().any(|l| !l.brake && l.out == CDC_OUT),
+        &format!("SET_MOTOR_PWM {CDC_PWM} reached the outputs as {CDC_OUT:?}"),
+    )?;
+    // 3. Right after the drive, while the board still runs on its last frame: a corrupted frame
+    // (a SET_MOTOR_PWM of -900 on every motor, one payload bit flipped) is refused and changes
+    // nothing: no valid frame counted, -900 (−720 counts) never on an output.
+    let before = last(q).ok_or("no trace line")?;
+    let bad = corrupted_pwm_frame();
+    let r = motorlink(ml, &["send-hex", pty, &bad, "--listen-ms", "100"])?;
+    expect(r.ok, "corrupted frame written")?;
+    q.wait_for("the corrupted frame refused", 10, |t| {
+        t.last().is_some_and(|l| l.rejected == before.rejected + 1)
+    })?;
+    let t = q.trace();
+    expect(
+        refused_changed_nothing(&t, before.rejected + 1, |l| {
+            l.out.iter().any(|o| o == "-720")
+        }),
+        "the corrupted frame counted as refused, never applied (no valid frame after it, -900 never on an output)",
+    )?;
+    // The host stopped: BRAKE within the frames' timeout_ms of 250 (threshold 249 ticks).
+    let worst_250 = comm_loss_brake(q, 249)?;
+    // 4. ESTOP: from a running drive, latched at once by the link; an enable is refused while it
+    // holds; its release by the link leaves BRAKE latched; an explicit enable re-arms.
+    let r = motorlink(
+        ml,
+        &[
+            "drive",
+            pty,
+            "--enable",
+            "--pwm",
+            CDC_PWM,
+            "--timeout-ms",
+            "250",
             "--seconds",
             "1",
         ],
     )?;
-    expect(r.ok, "driving after the re-arm")?;
-    q.wait_for("BRAKE after the last session", 10, |t| {
-        t.last().is_some_and(|l| l.brake)
+    expect(r.ok, "drive --enable re-armed and drove")?;
+    let r = motorlink(ml, &["estop", "engage", pty])?;
+    expect(r.ok, "ESTOP 1 acknowledged with result 0")?;
+    q.wait_for("ESTOP latched by the link", 10, |t| {
+        t.last()
+            .is_some_and(|l| l.brake && l.owners == 2 && l.out.iter().all(|o| o == "S"))
     })?;
     let t = q.trace();
+    let i = t
+        .iter()
+        .position(|l| l.owners == 2)
+        .ok_or("no ESTOP line")?;
     expect(
-        t.iter().rev().take(40).any(|l| !l.brake && l.out == want),
+        i > 0 && !t[i - 1].brake && t[i].brake,
+        &format!(
+            "the ESTOP found the drive running (its last line before: tick {}) and braked it (tick {})",
+            t[i.saturating_sub(1)].tick,
+            t[i].tick
+        ),
+    )?;
+    let r = motorlink(ml, &["enable", "on", pty])?;
+    expect(
+        !r.ok,
+        "MOTOR_ENABLE 1 refused (result 1) while the ESTOP holds",
+    )?;
+    let r = motorlink(ml, &["estop", "release", pty])?;
+    expect(r.ok, "ESTOP 0 from its owner acknowledged")?;
+    q.wait_for("ESTOP released, still braked", 10, |t| {
+        t.last().is_some_and(|l| l.brake && l.owners == 0)
+    })?;
+    let from = q.trace().len();
+    let r = motorlink(
+        ml,
+        &[
+            "drive",
+            pty,
+            "--enable",
+            "--pwm",
+            CDC_PWM,
+            "--timeout-ms",
+            "100",
+            "--seconds",
+            "1.5",
+        ],
+    )?;
+    expect(
+        r.ok,
+        "re-armed by an explicit enable after the release, driving",
+    )?;
+    expect(
+        q.trace()[from..]
+            .iter()
+            .any(|l| !l.brake && l.out == CDC_OUT),
         "the re-armed drive reached the outputs",
     )?;
-    let (frame, brake, age) = brake_after_last_frame(&t).ok_or("no BRAKE after a frame")?;
-    let worst_ms2 = brake - frame + 1;
-    expect(
-        age == 99 && worst_ms2 < 100,
-        &format!("comm loss: BRAKE {worst_ms2} ms at most after the last valid frame (bound 100 ms), age {age}"),
-    )?;
+    // 5. The host stops: BRAKE within the frames' timeout_ms of 100 (threshold 99 ticks).
+    let worst_100 = comm_loss_brake(q, 99)?;
     Ok(format!(
-        "cdc end to end: PASS (comm-loss BRAKE at most {worst_ms} ms after the last frame with timeout_ms 200, {worst_ms2} ms with 100)"
+        "cdc end to end: PASS (comm-loss BRAKE at most {worst_250} ms after the last frame with timeout_ms 250, {worst_100} ms with timeout_ms 100)"
     ))
 }
 
@@ -421,18 +485,56 @@ fn corrupted_pwm_frame() -> String {
     frame.iter().map(|b| format!("{b:02x}")).collect()
 }
 
+/// A robust MTRS frame from the host's own encoder with one data byte changed (kept non-zero, so
+/// the frame keeps its length and its place in the stream, and fails its CRC).
+fn corrupted_mtrs_frame(ml: &Path) -> Result<String, String> {
+    let json = r#"{"cmd_type":"mtrs","is_relative":0,"mtr_angles":[-170,170,-170,170],"mtr_speed_deg_s":90,"mtr_accel_deg_s_s":0,"cmd_success":0}"#;
+    let r = motorlink(
+        ml,
+        &["encode", "--frame", "teensy-robust", json, "--motors", "4"],
+    )?;
+    let hex = r.stdout.trim().to_string();
+    let mut bytes: Vec<u8> = (0..hex.len() / 2)
+        .filter_map(|i| u8::from_str_radix(&hex[2 * i..2 * i + 2], 16).ok())
+        .collect();
+    let b = bytes.get_mut(12).ok_or("frame too short")?;
+    *b = if *b == 0x01 { 0x02 } else { 0x01 };
+    Ok(bytes.iter().map(|b| format!("{b:02x}")).collect())
+}
+
 fn teensy(q: &Qemu, ml: &Path) -> Result<String, String> {
     let pty = q.pty.as_str();
+    q.wait_for("the first tick", 10, |t| !t.is_empty())?;
     let r = motorlink(ml, &["ping", "--kind", "teensy", pty, "--count", "3"])?;
-    expect(r.ok, "probe (ENDEFF_OFF echo) answered")?;
-    // 30°, -45°, 90°, 0° at 1600 steps per revolution: 133.3 → 133, -200, 400, 0 steps.
+    expect(r.ok, "probe (ENDEFF_OFF) echoed (round trip)")?;
+    // A relative move is refused (cmd_success 0, exit 1), and so is an acceleration above the
+    // profile's; neither moves anything.
+    let r = motorlink(
+        ml,
+        &[
+            "move",
+            pty,
+            "--angles",
+            "5,5,5,5",
+            "--speed",
+            "90",
+            "--relative",
+            "--once",
+        ],
+    )?;
+    expect(!r.ok, "a relative MTRS echoed with cmd_success 0")?;
+    let r = motorlink(ml, &["config", pty, "--accel", "1000000"])?;
+    expect(
+        !r.ok,
+        "CONFIG above the profile's acceleration echoed with cmd_success 0",
+    )?;
+    // CAL then MTRS: 30°, -45°, 90°, 0° at 1600 steps per revolution are 133.3 → 133, -200, 400
+    // and 0 steps.
     let want = ["+133", "-200", "+400", "+0"];
     let r = motorlink(
         ml,
         &[
             "move",
-            "--kind",
-            "teensy",
             pty,
             "--cal",
             "--angles",
@@ -443,30 +545,39 @@ fn teensy(q: &Qemu, ml: &Path) -> Result<String, String> {
             "3",
         ],
     )?;
+    expect(r.ok, "CAL and MTRS echoed with cmd_success 1")?;
+    let t = q.trace();
     expect(
-        r.ok && !r.stdout.contains("\"cmd_success\":0"),
-        "CAL and MTRS echoed with cmd_success 1",
+        t.iter().any(|l| !l.brake && l.out == want),
+        &format!("MTRS 30,-45,90,0 reached the step targets as {want:?}"),
     )?;
-    q.wait_for("the joints' step targets at the angles", 5, |t| {
-        t.iter().any(|l| !l.brake && l.out == want)
-    })?;
-    println!("ok: MTRS 30,-45,90,0 reached the step targets as {want:?}");
-    q.wait_for("BRAKE after the host stopped", 10, |t| {
-        t.last().is_some_and(|l| l.brake)
-    })?;
-    let (frame, brake, age) = brake_after_last_frame(&q.trace()).ok_or("no BRAKE after a frame")?;
-    let worst_ms = brake - frame + 1;
-    expect(
-        age == 249 && worst_ms < 250,
-        &format!("comm loss: BRAKE {worst_ms} ms at most after the last valid frame (bound 250 ms), age {age}"),
+    // A corrupted frame right after: refused, never applied (the joints stay where they are).
+    let before = last(q).ok_or("no trace line")?;
+    let bad = corrupted_mtrs_frame(ml)?;
+    let r = motorlink(
+        ml,
+        &[
+            "send-hex",
+            "--kind",
+            "teensy",
+            pty,
+            &bad,
+            "--listen-ms",
+            "100",
+        ],
     )?;
-    let braked = last(q).ok_or("no trace line")?;
+    expect(r.ok, "corrupted frame written")?;
+    q.wait_for("the corrupted frame refused", 10, |t| {
+        t.last().is_some_and(|l| l.rejected == before.rejected + 1)
+    })?;
+    let worst = comm_loss_brake(q, 249)?;
+    let t = q.trace();
     expect(
-        braked.out == want,
-        "BRAKE stopped the joints where they stood",
+        refused_changed_nothing(&t, before.rejected + 1, |l| l.out != want),
+        "the corrupted frame changed nothing: no valid frame after it, the joints stayed at the last valid angles",
     )?;
     Ok(format!(
-        "teensy end to end: PASS (comm-loss BRAKE at most {worst_ms} ms after the last frame, bound 250 ms)"
+        "teensy end to end: PASS (comm-loss BRAKE at most {worst} ms after the last frame, bound 250 ms)"
     ))
 }
 
@@ -493,6 +604,23 @@ tick=259 mode=Brake age=199 drive=BRAKE valid=3 rejected=1 refusals=0 owners=0 o
         assert!(t[4].brake && !t[3].brake);
         // The last frame was counted at tick 60; BRAKE at 259, age 199.
         assert_eq!(brake_after_last_frame(&t), Some((60, 259, 199)));
+        // Refused at tick 60 (rejected 1), nothing valid after it; −720 never on an output.
+        assert!(refused_changed_nothing(&t, 1, |l| l
+            .out
+            .iter()
+            .any(|o| o == "-720")));
+        // A valid frame after the refusal, or the refused value on an output, fails the check.
+        let mut later = t.clone();
+        later[4].valid = 4;
+        assert!(!refused_changed_nothing(&later, 1, |_| false));
+        assert!(!refused_changed_nothing(&t, 1, |l| l
+            .out
+            .iter()
+            .any(|o| o == "+240")));
+        assert!(
+            !refused_changed_nothing(&t, 2, |_| false),
+            "no such refusal"
+        );
     }
 
     #[test]

@@ -1,17 +1,19 @@
-//! The `cdc` image (seed 001, UART variant): the RTIC shell around the seed 001 board application
+//! The `cdc` image (seed 001; USART1, or USB CDC ACM with feature `usb`): the RTIC shell around the seed 001 board application
 //! (`mcu::cdc`). Board: `firmware::board::cdc` (pin map, timers, sensors).
 //!
 //! ```text
 //!  priority 5  estop_input    EXTI4 (PD4, both edges)  mcu::EstopInput::edge_then  every motor shorted in the handler
-//!  priority 2  link_usart     USART1 (RXNE, TXE)       mcu::cdc::CdcLinkTask::on_byte  byte → ladder → ACK/STATUS queued
+//!  priority 2  link_usart     USART1 (RXNE, TXE)       mcu::cdc::CdcLinkTask::on_byte  byte → ladder → ACK/STATUS queued;
+//!                                                       mcu::cdc::outputs_after_frame   a frame that braked (ESTOP): motors shorted at once
+//!  (priority 2  link_usb      OTG_FS, feature `usb`:   the same body over USB CDC ACM)
 //!  priority 2  watchdog_tick  TIM2 update      1 kHz   mcu::serial::tick, mcu::cdc::motor_outputs  → CCR, IN1/IN2, IWDG
 //!  priority 1  imu_read       TIM3 update    100 Hz    mcu::cdc::imu_from_raw  MPU6050, battery → IMU_MPU6050
 //!  idle        wfi
 //! ```
 //!
 //! The ladder (`mcu::Safety<4>`) is shared only by the two priority-2 tasks, which never preempt
-//! each other (`#[lock_free]`). A frame never moves the motors: only the tick writes their outputs;
-//! the ESTOP handler can only short them.
+//! each other (`#[lock_free]`). A frame never moves the motors: only the tick drives them; the ESTOP
+//! handler and a frame that braked the ladder (`ESTOP 1`) can only short them.
 #![no_std]
 #![no_main]
 #![deny(unsafe_code)]
@@ -20,11 +22,13 @@ use firmware as _;
 
 #[rtic::app(device = stm32f4xx_hal::pac, peripherals = true)]
 mod app {
-    use firmware::board::cdc::{self, Imu, Motors, Vbat, PWM_FULL};
+    use firmware::board::cdc::{self, Imu, Motors, Port, Vbat, PWM_FULL};
     use firmware::board::trace::Trace;
-    use firmware::board::uart::Uart;
     use firmware::board::{self, EstopPin, Iwdg, Periodic};
-    use mcu::cdc::{imu_from_raw, motor_outputs, BoardStatus, CdcLinkTask, IMU_SCALE, MOTORS};
+    use mcu::cdc::{
+        imu_from_raw, motor_outputs, outputs_after_frame, BoardStatus, CdcLinkTask, IMU_SCALE,
+        MOTORS,
+    };
     use mcu::serial::SerialTickInputs;
     use mcu::{EstopInput, Safety};
     use stm32f4xx_hal::pac;
@@ -40,8 +44,8 @@ mod app {
         safety: Safety<MOTORS>,
         /// The link task's state and its transmit queue (ceiling 2).
         link: CdcLinkTask,
-        /// USART1 (ceiling 2).
-        uart: Uart,
+        /// The link: USART1, or USB CDC ACM with feature `usb` (ceiling 2).
+        port: Port,
         /// What STATUS reports of the board (ceiling 2).
         status: BoardStatus,
     }
@@ -58,10 +62,10 @@ mod app {
         imu_saturated: u32,
     }
 
-    #[init]
+    #[init(local = [port_mem: cdc::PortMem = cdc::PORT_MEM_INIT])]
     fn init(cx: init::Context) -> (Shared, Local) {
         let boot = firmware::panic::boot(&cx.device.RCC);
-        let (b, iwdg, dbg) = cdc::init(cx.device);
+        let (b, iwdg, dbg) = cdc::init(cx.device, cx.local.port_mem);
         let iwdg = Iwdg::start(iwdg, &dbg);
         defmt::info!(
             "cdc firmware up: reset {} (count {=u32}, panic line {=u32}); BRAKE latched until MOTOR_ENABLE",
@@ -75,7 +79,7 @@ mod app {
                 estop: EstopInput::new(),
                 safety: Safety::new(statemachine::Config::CDC),
                 link: CdcLinkTask::new(),
-                uart: b.uart,
+                port: b.port,
                 status: BoardStatus::default(),
             },
             Local {
@@ -108,21 +112,49 @@ mod app {
     }
 
     /// Link bytes in and out. Priority 2, USART1 (RXNE per received byte, TXE while replies wait).
-    #[task(binds = USART1, priority = 2, shared = [safety, link, uart, status])]
+    #[cfg(not(feature = "usb"))]
+    #[task(binds = USART1, priority = 2, shared = [safety, link, port, status, motors])]
     fn link_usart(cx: link_usart::Context) {
         let safety = cx.shared.safety;
         let mut status = cx.shared.status;
+        let mut motors = cx.shared.motors;
         let st = status.lock(|s| *s);
-        (cx.shared.link, cx.shared.uart).lock(|link, uart| {
+        (cx.shared.link, cx.shared.port).lock(|link, uart| {
             while let Some(b) = uart.read() {
-                link.on_byte(safety, b, &st);
+                if let Some(m) = link
+                    .on_byte(safety, b, &st)
+                    .and_then(|out| outputs_after_frame(&out, PWM_FULL))
+                {
+                    motors.lock(|motors| motors.set(&m));
+                }
             }
             uart.pump(&mut link.tx);
         });
     }
 
+    /// Link bytes in and out over USB (feature `usb`). Priority 2, OTG FS (every USB event).
+    #[cfg(feature = "usb")]
+    #[task(binds = OTG_FS, priority = 2, shared = [safety, link, port, status, motors])]
+    fn link_usb(cx: link_usb::Context) {
+        let safety = cx.shared.safety;
+        let mut status = cx.shared.status;
+        let mut motors = cx.shared.motors;
+        let st = status.lock(|s| *s);
+        (cx.shared.link, cx.shared.port).lock(|link, usb| {
+            usb.poll(|b| {
+                if let Some(m) = link
+                    .on_byte(safety, b, &st)
+                    .and_then(|out| outputs_after_frame(&out, PWM_FULL))
+                {
+                    motors.lock(|motors| motors.set(&m));
+                }
+            });
+            usb.pump(&mut link.tx);
+        });
+    }
+
     /// Watchdog tick. Priority 2, 1 kHz: TIM2 update, the ladder's time base.
-    #[task(binds = TIM2, priority = 2, shared = [safety, motors, estop, link, uart, status],
+    #[task(binds = TIM2, priority = 2, shared = [safety, motors, estop, link, port, status],
            local = [tick_timer, iwdg, trace])]
     fn watchdog_tick(mut cx: watchdog_tick::Context) {
         cx.local.tick_timer.clear();
@@ -145,7 +177,7 @@ mod app {
             s.t_ms = t_ms;
             *s
         });
-        (cx.shared.link, cx.shared.uart).lock(|l, u| {
+        (cx.shared.link, cx.shared.port).lock(|l, u| {
             l.periodic(safety, &st);
             u.pump(&mut l.tx);
         });
@@ -160,7 +192,7 @@ mod app {
     }
 
     /// IMU and battery. Priority 1, 100 Hz: TIM3 update. The I2C read blocks only this task.
-    #[task(binds = TIM3, priority = 1, shared = [link, uart, status],
+    #[task(binds = TIM3, priority = 1, shared = [link, port, status],
            local = [imu_timer, imu, vbat, imu_saturated])]
     fn imu_read(mut cx: imu_read::Context) {
         cx.local.imu_timer.clear();
@@ -180,7 +212,7 @@ mod app {
                     *cx.local.imu_saturated
                 );
             }
-            (cx.shared.link, cx.shared.uart).lock(|l, u| {
+            (cx.shared.link, cx.shared.port).lock(|l, u| {
                 l.send_imu(&imu);
                 u.pump(&mut l.tx);
             });

@@ -5,7 +5,7 @@
 //!  priority 5  estop_input    EXTI4 (PD4, both edges)  mcu::EstopInput::edge_then  step generator halted in the handler
 //!  priority 3  step_gen       TIM5 update     10 kHz   mcu::teensy::StepGen::run   at most one step per joint
 //!  priority 2  link_usart     USART1 (RXNE, TXE)       mcu::teensy::TeensyLinkTask::on_byte  byte → ladder → echo queued
-//!  priority 2  watchdog_tick  TIM2 update      1 kHz   mcu::serial::tick, mcu::teensy::Joints::tick  → step targets, IWDG
+//!  priority 2  watchdog_tick  TIM2 update      1 kHz   mcu::serial::tick, mcu::teensy::drive_joints  → step targets, IWDG
 //!  idle        wfi
 //! ```
 //!
@@ -27,7 +27,7 @@ mod app {
     use mcu::serial::SerialTickInputs;
     use mcu::teensy::{BoardAction, Joints, StepGen, TeensyLinkTask, JOINTS};
     use mcu::{EstopInput, Safety};
-    use statemachine::{Config, Drive, Position};
+    use statemachine::{Config, Position};
     use stm32f4xx_hal::pac;
 
     /// The arm's profile.
@@ -154,16 +154,8 @@ mod app {
         let safety = cx.shared.safety;
         let out = mcu::serial::tick(safety, &inputs);
         let joints = cx.shared.joints;
-        joints.tick(&out.drive);
-        let targets = joints.step_targets();
-        let braked = matches!(out.drive, Drive::Brake);
-        (cx.shared.stepgen, cx.shared.estop).lock(|g, e| {
-            if braked || e.press_pending() {
-                g.halt();
-            } else {
-                g.set_target(targets);
-            }
-        });
+        let targets = (cx.shared.stepgen, cx.shared.estop)
+            .lock(|g, e| mcu::teensy::drive_joints(joints, g, &out.drive, e.press_pending()));
         cx.shared.uart.pump(&mut cx.shared.link.tx);
         cx.local.iwdg.feed();
         cx.local

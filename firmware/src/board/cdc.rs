@@ -264,6 +264,26 @@ impl Imu {
     }
 }
 
+/// The link of this build: USART1, or USB CDC ACM with feature `usb`.
+#[cfg(not(feature = "usb"))]
+pub type Port = super::uart::Uart;
+/// The link of this build: USB CDC ACM (feature `usb`).
+#[cfg(feature = "usb")]
+pub type Port = super::usb::UsbLink;
+
+/// Static memory the link needs (USB's endpoint memory; nothing for the UART).
+#[cfg(not(feature = "usb"))]
+pub type PortMem = ();
+/// Static memory the link needs: the USB bus allocator and its endpoint memory.
+#[cfg(feature = "usb")]
+pub type PortMem = super::usb::Mem;
+/// [`PortMem`] before `init`.
+#[cfg(not(feature = "usb"))]
+pub const PORT_MEM_INIT: PortMem = ();
+/// [`PortMem`] before `init`.
+#[cfg(feature = "usb")]
+pub const PORT_MEM_INIT: PortMem = super::usb::MEM_INIT;
+
 /// Everything `init` hands to the tasks of the `cdc` image.
 pub struct CdcBoard {
     /// The four motor outputs.
@@ -271,7 +291,7 @@ pub struct CdcBoard {
     /// The local ESTOP input.
     pub estop: super::EstopPin,
     /// The link.
-    pub uart: super::uart::Uart,
+    pub port: Port,
     /// 1 kHz tick timer.
     pub tick: super::Periodic<pac::TIM2>,
     /// 100 Hz IMU timer.
@@ -284,7 +304,10 @@ pub struct CdcBoard {
 
 /// Brings up the seed 001 board with every motor shorted: clocks, ESTOP input, motor outputs,
 /// link, sensors; the drivers leave standby last.
-pub fn init(dp: pac::Peripherals) -> (CdcBoard, pac::IWDG, pac::DBGMCU) {
+pub fn init(
+    dp: pac::Peripherals,
+    port_mem: &'static mut PortMem,
+) -> (CdcBoard, pac::IWDG, pac::DBGMCU) {
     use stm32f4xx_hal::prelude::*;
     let mut rcc = super::clocks(dp.RCC);
     let gpioa = dp.GPIOA.split(&mut rcc);
@@ -305,7 +328,8 @@ pub fn init(dp: pac::Peripherals) -> (CdcBoard, pac::IWDG, pac::DBGMCU) {
     };
     let rcc_regs: &mut pac::RCC = &mut rcc;
     let motors = Motors::new(dp.TIM8, dp.GPIOE, rcc_regs);
-    let uart = super::uart::Uart::new(dp.USART1, rcc_regs);
+    #[cfg(not(feature = "usb"))]
+    let port = super::uart::Uart::new(dp.USART1, rcc_regs);
     let vbat = Vbat::new(dp.ADC1, rcc_regs);
     let tick = super::Periodic::<pac::TIM2>::new(dp.TIM2, rcc_regs);
     let imu_timer = super::Periodic::<pac::TIM3>::new(dp.TIM3, rcc_regs);
@@ -315,16 +339,30 @@ pub fn init(dp: pac::Peripherals) -> (CdcBoard, pac::IWDG, pac::DBGMCU) {
         gpioc.pc8.into_alternate::<3>(),
         gpioc.pc9.into_alternate::<3>(),
         gpioc.pc4.into_analog(),
+    );
+    #[cfg(not(feature = "usb"))]
+    let _ = (
         gpioa.pa9.into_alternate::<7>(),
         gpioa.pa10.into_alternate::<7>(),
     );
+    #[cfg(feature = "usb")]
+    let port = {
+        let usb = stm32f4xx_hal::otg_fs::USB::new(
+            (dp.OTG_FS_GLOBAL, dp.OTG_FS_DEVICE, dp.OTG_FS_PWRCLK),
+            (gpioa.pa11, gpioa.pa12),
+            &rcc.clocks,
+        );
+        super::usb::UsbLink::new(usb, port_mem)
+    };
+    #[cfg(not(feature = "usb"))]
+    let () = *port_mem;
     // Every motor is shorted by its IN lines: the drivers may leave standby.
     stby.set_high();
     (
         CdcBoard {
             motors,
             estop,
-            uart,
+            port,
             tick,
             imu_timer,
             imu,

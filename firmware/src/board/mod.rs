@@ -57,6 +57,8 @@ pub mod teensy;
 pub mod timers;
 pub mod trace;
 pub mod uart;
+#[cfg(feature = "usb")]
+pub mod usb;
 
 pub use bridge::Bridge;
 pub use sense::{CurrentSense, Encoders};
@@ -276,13 +278,15 @@ pub fn clocks(rcc: pac::RCC) -> stm32f4xx_hal::rcc::Rcc {
     use stm32f4xx_hal::rcc::Config;
     #[cfg(not(feature = "qemu"))]
     {
-        let rcc = rcc.freeze(
-            Config::hse(8.MHz())
-                .sysclk(SYSCLK_HZ.Hz())
-                .hclk(SYSCLK_HZ.Hz())
-                .pclk1(42.MHz())
-                .pclk2(84.MHz()),
-        );
+        let cfg = Config::hse(8.MHz())
+            .sysclk(SYSCLK_HZ.Hz())
+            .hclk(SYSCLK_HZ.Hz())
+            .pclk1(42.MHz())
+            .pclk2(84.MHz());
+        // OTG FS needs 48 MHz from the main PLL (VCO 336 MHz: P = 2 for 168 MHz, Q = 7 for 48).
+        #[cfg(feature = "usb")]
+        let cfg = cfg.require_pll48clk();
+        let rcc = rcc.freeze(cfg);
         clock::enable_css(&rcc);
         rcc
     }

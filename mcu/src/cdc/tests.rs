@@ -200,6 +200,59 @@ fn estop_latches_and_only_its_release_then_an_enable_rearm() {
     );
 }
 
+/// The seed: `MOTOR_ENABLE 0` forces the outputs to 0, `MOTOR_ENABLE 1` lets `SET_MOTOR_PWM`
+/// take effect. A host that disables the motors and keeps its 50 Hz stream running must not have
+/// them driven again by the next frame; the stream keeps the link alive (no comm-loss BRAKE).
+#[test]
+fn motor_enable_0_holds_the_motors_off_under_the_stream_until_motor_enable_1() {
+    let (mut l, mut s) = board();
+    send(&mut l, &mut s, &Message::MotorEnable(true));
+    let run = |s: &mut Safety<MOTORS>, l: &mut CdcLinkTask, ticks: u32| {
+        let mut outs = Vec::new();
+        for _ in 0..ticks {
+            let out = crate::serial::tick(s, &Default::default());
+            if s.ticks() % 20 == 0 {
+                send(l, s, &pwm([500; 4], 200));
+            }
+            outs.push(out);
+        }
+        outs
+    };
+    send(&mut l, &mut s, &pwm([500; 4], 200));
+    let driving = run(&mut s, &mut l, 300);
+    assert!(motor_outputs(&driving[299].drive, 1000)[0].ccr > 0);
+    replies(&mut l);
+
+    send(&mut l, &mut s, &Message::MotorEnable(false));
+    assert_eq!(replies(&mut l), [ack(MsgId::MotorEnable, ACK_OK)]);
+    for (i, out) in run(&mut s, &mut l, 500).iter().enumerate() {
+        assert_eq!(out.mode, Mode::Stop, "tick {i} after MOTOR_ENABLE 0");
+        assert_eq!(
+            motor_outputs(&out.drive, 1000),
+            [MotorOutput::COAST; MOTORS],
+            "tick {i} after MOTOR_ENABLE 0: the frames must not drive the motors"
+        );
+    }
+    l.send_status(&s, &ST);
+    let [Message::Status(st)] = replies(&mut l)[..] else {
+        std::panic!("one STATUS");
+    };
+    assert!(!st.flags.has(StatusFlags::MOTOR_ENABLED));
+
+    send(&mut l, &mut s, &Message::MotorEnable(true));
+    assert_eq!(replies(&mut l), [ack(MsgId::MotorEnable, ACK_OK)]);
+    let again = run(&mut s, &mut l, 100);
+    assert!(
+        motor_outputs(&again[99].drive, 1000)[0].ccr > 0,
+        "MOTOR_ENABLE 1 lets the frames drive again"
+    );
+    assert_eq!(
+        s.ladder().counters().brake_entries,
+        0,
+        "no BRAKE on the way"
+    );
+}
+
 #[test]
 fn a_local_estop_is_not_released_by_the_link() {
     let (mut l, mut s) = board();

@@ -97,6 +97,7 @@ fn the_arm_moves_to_its_angles_and_brakes_on_comm_loss() {
     let target = [45, -90, 10, 0];
     let mut out = s.output();
     let mut last_frame = 0;
+    let mut braked_at = None;
     for t in 1..=3000u32 {
         if t % 20 == 0 && t <= 2000 {
             send(&mut l, &mut s, &mtrs(target, 180));
@@ -104,6 +105,9 @@ fn the_arm_moves_to_its_angles_and_brakes_on_comm_loss() {
         }
         out = crate::serial::tick(&mut s, &Default::default());
         j.tick(&out.drive);
+        if out.mode == Mode::Brake && braked_at.is_none() && t > 2000 {
+            braked_at = Some(s.ticks());
+        }
         if t == 1990 {
             assert_eq!(out.mode, Mode::Normal);
             // 90° at 180 °/s takes 0.5 s plus the ramps: long arrived.
@@ -119,8 +123,13 @@ fn the_arm_moves_to_its_angles_and_brakes_on_comm_loss() {
     assert_eq!(out.mode, Mode::Brake);
     let c = s.ladder().counters();
     assert!(c.brake_entries >= 1);
-    // Seed 003's bound: BRAKE strictly within 250 ms of the last frame; the joints stopped.
-    assert!(s.ticks() - last_frame > 249);
+    // Seed 003's bound: BRAKE strictly within 250 ms of the last frame (the frame came before
+    // tick last_frame + 1; BRAKE at its 249th tick); the joints stopped.
+    let after = braked_at.expect("BRAKE after the link stopped") - last_frame;
+    assert_eq!(
+        after, 249,
+        "BRAKE at the profile's threshold, not earlier, not later"
+    );
     assert_eq!(j.velocities(), [Speed::ZERO; JOINTS]);
 }
 
@@ -219,4 +228,41 @@ fn a_cal_before_the_first_move_still_rearms_within_the_threshold() {
         crate::serial::tick(&mut s, &Default::default()).mode,
         Mode::Brake
     );
+}
+
+#[test]
+fn brake_halts_the_motors_and_the_profiles_restart_from_them() {
+    let cfg = Config::TEENSY;
+    let mut j = Joints::new([Position::ZERO; JOINTS], &cfg);
+    let mut g = StepGen::new([0; JOINTS]);
+    let run = Drive::Run(
+        [AxisDrive::Position {
+            target: Position::from_num(3),
+            cap: Speed::from_num(10),
+        }; JOINTS],
+    );
+    for _ in 0..200 {
+        drive_joints(&mut j, &mut g, &run, false);
+        // Ten step-generator runs per tick.
+        for _ in 0..10 {
+            g.run();
+        }
+    }
+    // Moving: the next tick's target is ahead of the motors.
+    drive_joints(&mut j, &mut g, &run, false);
+    let at = g.position();
+    let t = drive_joints(&mut j, &mut g, &Drive::Brake, false);
+    assert_eq!(t, at, "halted where the motors stand");
+    assert_eq!(g.run(), [StepPulse::Idle; JOINTS]);
+    assert_eq!(
+        j.step_targets(),
+        at,
+        "the references restart from the motors"
+    );
+    // An ESTOP press not yet latched halts the same way.
+    let mut g2 = StepGen::new([0; JOINTS]);
+    let t = drive_joints(&mut j, &mut g2, &run, true);
+    assert_eq!(t, [0; JOINTS]);
+    // 1 rad = 254.6 steps; back and forth within one step.
+    assert_eq!(steps_of(rad_of(255)), 255);
 }

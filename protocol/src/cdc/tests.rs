@@ -128,20 +128,26 @@ fn stream_recovers_from_a_truncated_frame() {
     for _ in 0..3 {
         bytes.extend(frame(0x10, &[]));
     }
-    let got = collect(&mut StreamDecoder::new(), &bytes);
-    // The broken frame's CRC is checked once its 26 announced bytes are in (7 + 7 + 6 + 6 of them),
-    // then the rescan finds the swallowed ESTOP and PINGs.
+    // The ESTOP is delivered at its own last byte (the 14th), not after the 26 bytes the broken
+    // IMU frame announced; the IMU candidate, which started before it, goes with it.
+    let mut dec = StreamDecoder::new();
+    let at: Vec<_> = bytes
+        .iter()
+        .enumerate()
+        .filter_map(|(i, &b)| dec.push(b).map(|r| (i, r)))
+        .collect();
     let ping = Ok(Message::Ping);
     assert_eq!(
-        got,
+        at,
         [
-            Err(Error::Crc),
-            Ok(Message::Estop(Estop::Engage)),
-            ping,
-            ping,
-            ping
+            (13, Ok(Message::Estop(Estop::Engage))),
+            (19, ping),
+            (25, ping),
+            (31, ping)
         ]
     );
+    assert_eq!(dec.stats().dropped_bytes, 7);
+    assert_eq!(dec.stats().crc_errors, 0);
 }
 
 #[test]
@@ -241,4 +247,132 @@ fn events_for_the_ladder() {
     // The seed 000 profile refuses duty.
     let r = statemachine::validate(&c, None, Speed::ONE, &Config::AMR_SPI);
     assert_eq!(r, Err(RejectReason::UnsupportedMode));
+}
+
+/// The bytes from the alphabet of [`stream_holds_back_no_frame_exhaustively`]: each makes or
+/// breaks a candidate (zero, SOF, a LEN reaching past everything, the MSG_IDs, LEN and action of
+/// ESTOP, PING's MSG_ID, the first CRC byte of the ESTOP frame).
+const DANGEROUS: [u8; 8] = [0x00, 0xAA, 0x55, 0xFF, 0x03, 0x01, 0x10, 0xDC];
+
+/// Longest garbage prefix [`stream_holds_back_no_frame_exhaustively`] tries.
+const PREFIX: usize = 6;
+
+/// Every garbage prefix of up to [`PREFIX`] bytes from [`DANGEROUS`], then frames: an ESTOP, alone
+/// or behind a PING, a truncated copy of itself, a truncated IMU frame (LEN 20), or a STATUS
+/// whose payload holds a false SOF with LEN 255. At every byte the decoder answers as the naive
+/// reference (`verification::Reference`, which tries every start), its counters agree, and the
+/// ESTOP is delivered at its last byte unless the garbage began a frame with a good CRC.
+#[test]
+fn stream_holds_back_no_frame_exhaustively() {
+    let estop = encoded(&Message::Estop(Estop::Engage));
+    assert_eq!(estop, [0xAA, 0x55, 0x03, 0x01, 0x01, 0xDC, 0xB6]);
+    let imu = encoded(&Message::Imu(Imu::default()));
+    // t_ms little-endian: AA 55 03 FF, a false SOF of LEN 255 inside the payload.
+    let status = encoded(&Message::Status(Status {
+        t_ms: 0xFF03_55AA,
+        ..Status::default()
+    }));
+    assert_eq!(status[4..8], [0xAA, 0x55, 0x03, 0xFF]);
+    let tails: [Vec<u8>; 6] = [
+        estop.clone(),
+        [encoded(&Message::Ping), estop.clone()].concat(),
+        [&estop[..4], &estop].concat(),
+        [&estop[..6], &estop].concat(),
+        [&imu[..7], &estop].concat(),
+        [status, estop.clone()].concat(),
+    ];
+    let mut streams = 0u32;
+    let mut taken = 0u32;
+    for len in 0..=PREFIX {
+        for code in 0..DANGEROUS.len().pow(len as u32) {
+            let mut prefix = Vec::with_capacity(len);
+            let mut c = code;
+            for _ in 0..len {
+                prefix.push(DANGEROUS[c % DANGEROUS.len()]);
+                c /= DANGEROUS.len();
+            }
+            for tail in &tails {
+                let stream = [prefix.as_slice(), tail].concat();
+                let mut dec = StreamDecoder::new();
+                let mut reference = verification::Reference::new();
+                let mut last = None;
+                for end in 1..=stream.len() {
+                    let got = dec.push(stream[end - 1]);
+                    reference.check(&stream[..end], &dec, got);
+                    last = got;
+                }
+                let garbage_frame = reference.first_start.is_some_and(|s| s < len);
+                assert!(
+                    garbage_frame || last == Some(Ok(Message::Estop(Estop::Engage))),
+                    "ESTOP held back after {prefix:02X?}, tail {tail:02X?}"
+                );
+                streams += 1;
+                taken += u32::from(garbage_frame);
+            }
+        }
+    }
+    // 299,593 prefixes, 6 tails. A garbage frame needs a good CRC over bytes the prefix chose:
+    // none of these prefixes makes one.
+    assert_eq!(streams, 1_797_558);
+    assert_eq!(taken, 0);
+}
+
+/// The worst case of the decoder's CRC work at one byte, which its documentation states: at most
+/// 64 candidates end at the same byte, their CRCs covering at most 8,384 bytes in all; and a
+/// window that reaches it makes the decoder check all 64.
+#[test]
+fn crc_work_per_byte_is_bounded() {
+    // The bytes a candidate fixes, in a window of `w` bytes whose last byte it ends at.
+    let fixed = |w: usize, s: usize| [(s, 0xAA), (s + 1, 0x55), (s + 3, w - 6 - s)];
+    let compatible = |w: usize, t: usize, s: usize| {
+        fixed(w, t)
+            .iter()
+            .all(|&(p, v)| fixed(w, s).iter().all(|&(q, u)| p != q || v == u))
+    };
+    // Every window length, every set of starts, by dynamic programming over the starts from left to
+    // right: only the starts chosen among the last three can share a byte with the next one
+    // (a candidate fixes its bytes 0, 1 and 3). Each state keeps the most candidates and,
+    // separately, the most bytes covered.
+    let mut most = (0usize, 0usize);
+    for w in MIN_FRAME_LEN..=MAX_FRAME_LEN {
+        let mut states: [Option<(usize, usize)>; 8] = [None; 8];
+        states[0] = Some((0, 0));
+        for s in 0..=w - MIN_FRAME_LEN {
+            let covered = w - 6 - s + 2;
+            let mut next: [Option<(usize, usize)>; 8] = [None; 8];
+            for (mask, state) in states.iter().enumerate() {
+                let Some((count, bytes)) = *state else {
+                    continue;
+                };
+                let mut keep = |m: usize, c: usize, b: usize| {
+                    let e = next[m].get_or_insert((c, b));
+                    *e = (e.0.max(c), e.1.max(b));
+                };
+                keep((mask << 1) & 7, count, bytes);
+                let fits = (1..=3).all(|d| mask & (1 << (d - 1)) == 0 || compatible(w, s - d, s));
+                if fits {
+                    keep(((mask << 1) | 1) & 7, count + 1, bytes + covered);
+                }
+            }
+            states = next;
+        }
+        for (c, b) in states.into_iter().flatten() {
+            most = (most.0.max(c), most.1.max(b));
+        }
+    }
+    assert_eq!(most, (64, 8384));
+    // A window reaching 64: a false SOF every 4 bytes, LEN 255, 251, …, 3, all ending at byte 260.
+    let mut window = [0x00; MAX_FRAME_LEN];
+    for s in (0..=252).step_by(4) {
+        window[s] = 0xAA;
+        window[s + 1] = 0x55;
+        window[s + 3] = (MAX_FRAME_LEN - 6 - s) as u8;
+    }
+    let mut dec = StreamDecoder::new();
+    for &b in &window[..MAX_FRAME_LEN - 1] {
+        assert_eq!(dec.push(b), None);
+    }
+    assert_eq!(dec.buffered(), MAX_FRAME_LEN - 1);
+    assert_eq!(dec.push(window[MAX_FRAME_LEN - 1]), Some(Err(Error::Crc)));
+    assert_eq!(dec.stats().crc_errors, 64);
 }

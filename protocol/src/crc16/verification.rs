@@ -140,6 +140,25 @@ pub(crate) fn check_checksum_total(src: &mut impl Source) {
     cover!(src, n % 16 == 15, "every block size used");
 }
 
+/// The seeds' bitwise CRC loop, one byte at a time: the same function as [`checksum`] (the test
+/// `seed_loop_is_checksum` compares them at every length of a seed 001 frame), without the
+/// block folding. The stream decoders' property harnesses use it in place of [`checksum`]: there the
+/// solver cannot fix the lengths of the slices checked, and the 16-byte blocks multiply the formula.
+pub(crate) fn seed_loop(bytes: &[u8]) -> u16 {
+    let mut crc: u16 = 0xFFFF;
+    for &b in bytes {
+        crc ^= u16::from(b) << 8;
+        for _ in 0..8 {
+            crc = if crc & 0x8000 != 0 {
+                (crc << 1) ^ 0x1021
+            } else {
+                crc << 1
+            };
+        }
+    }
+    crc
+}
+
 /// Stand-ins for [`checksum`] under Kani (used with `#[kani::stub(crate::crc16::checksum, …)]`,
 /// which needs `cargo kani -Z stubbing`).
 #[cfg(kani)]
@@ -223,6 +242,33 @@ mod twins {
     use super::*;
     use crate::crc16::TABLES;
     use statemachine::harness::Twin;
+
+    #[test]
+    fn seed_loop_is_checksum() {
+        let mut x: u32 = 0x5EED;
+        let mut buf = [0u8; TOTAL_MAX];
+        for round in 0..20 {
+            for b in buf.iter_mut() {
+                x ^= x << 13;
+                x ^= x >> 17;
+                x ^= x << 5;
+                // Some rounds all zeros or all ones, the others random.
+                *b = match round {
+                    0 => 0,
+                    1 => 0xFF,
+                    _ => x as u8,
+                };
+            }
+            for len in 0..=TOTAL_MAX {
+                assert_eq!(
+                    seed_loop(&buf[..len]),
+                    checksum(&buf[..len]),
+                    "{round} {len}"
+                );
+            }
+        }
+        assert_eq!(seed_loop(b"123456789"), crate::crc16::CHECK);
+    }
 
     #[test]
     fn checksum_total() {

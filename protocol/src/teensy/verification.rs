@@ -1,8 +1,8 @@
 //! Kani harnesses of the seed 003 packets and their `cargo test` twins.
 
 use super::*;
-use statemachine::cover;
 use statemachine::harness::Source;
+use statemachine::{check, cover};
 
 /// Motor count used by the harnesses (small under Kani).
 const N: usize = if cfg!(kani) { 1 } else { 4 };
@@ -200,18 +200,19 @@ pub(crate) fn check_robust_total(src: &mut impl Source) {
     cover!(src, r == Err(RejectReason::Framing), "robust framing error");
 }
 
-/// One `RobustDecoder::push` from any state (any bytes held up to its limit, either overflow flag,
-/// any counters) never panics, keeps the buffer within its limit, never lowers a counter, and
-/// answers only at a 0x00: so the stream decoder is total by induction over the bytes fed.
+/// One `RobustDecoder::push` from any state (any bytes, any number held up to its limit, any
+/// counters) never panics, keeps the bytes held within the limit, never lowers a counter, answers
+/// only at a 0x00, and keeps exactly the last non-zero bytes of the run: after a non-zero byte the
+/// bytes held are the ones held before, the oldest dropped if the limit was reached, then the new
+/// byte. So, by induction over the bytes fed, the decoder holds the last `min(run, ROBUST_LEN − 1)`
+/// bytes of the current run, whatever came before them.
 pub(crate) fn check_robust_push_step(src: &mut impl Source) {
     let bytes: [u8; ROBUST_BUF] = src.bytes();
     let limit = Msg::ROBUST_LEN - 1;
     let held = usize::from(src.below(limit as u8 + 1));
     let mut dec = RobustDecoder::<N>::new();
-    if dec.buf.extend_from_slice(&bytes[..held]).is_err() {
-        return;
-    }
-    dec.overflow = src.bool();
+    dec.buf = bytes;
+    dec.len = held;
     dec.stats = RobustStats {
         frames: src.u32(),
         errors: src.u32(),
@@ -221,17 +222,141 @@ pub(crate) fn check_robust_push_step(src: &mut impl Source) {
     let byte = src.u8();
     let r = dec.push(byte);
     let after = dec.stats;
-    assert!(dec.buf.len() <= limit);
-    assert!(after.frames >= before.frames && after.errors >= before.errors);
-    assert!(after.dropped_bytes >= before.dropped_bytes);
-    assert!(r.is_none() || byte == 0);
+    check!(dec.len <= limit, "at most a frame's bytes are held");
+    check!(
+        after.frames >= before.frames && after.errors >= before.errors,
+        "counters never go down"
+    );
+    check!(
+        after.dropped_bytes >= before.dropped_bytes,
+        "counters never go down"
+    );
+    check!(r.is_none() || byte == 0, "an answer only at a 0x00");
+    if byte == 0 {
+        check!(dec.len == 0, "a 0x00 ends the run");
+        check!(r.is_some() == (held > 0), "every non-empty run is answered");
+    } else {
+        let dropped = usize::from(held == limit);
+        check!(dec.len == held + 1 - dropped, "the new byte is kept");
+        check!(dec.buf[dec.len - 1] == byte, "the new byte is kept last");
+        // One byte kept before it, anywhere: the byte held before, one place further on if the
+        // oldest was dropped.
+        let i = usize::from(src.below(limit as u8));
+        if i + 1 < dec.len {
+            check!(
+                dec.buf[i] == bytes[i + dropped],
+                "the bytes kept are the last ones of the run, in order"
+            );
+        }
+        check!(
+            after.dropped_bytes == before.dropped_bytes.saturating_add(dropped as u32),
+            "each byte dropped is counted"
+        );
+    }
     cover!(src, byte != 0 && held == limit, "byte dropped at the limit");
     cover!(src, r.is_some_and(|r| r.is_err()), "frame refused");
-    cover!(
-        src,
-        byte == 0 && dec.buf.is_empty(),
-        "buffer cleared at a terminator"
+    cover!(src, byte == 0 && held == 0, "0x00 after 0x00");
+}
+
+/// The naive reference of [`RobustDecoder`]'s property: what `push` of the last byte of `stream`
+/// (the whole stream so far) must return, found by trying [`CmdMsg::decode_robust`] on every slice
+/// that ends there, earliest first. `None` if no slice holds a frame with a good COBS structure
+/// and CRC; the caller then accepts `None` or a framing or CRC error.
+pub(crate) fn reference(stream: &[u8]) -> Option<Result<Msg, RejectReason>> {
+    (0..stream.len())
+        .map(|start| Msg::decode_robust(&stream[start..]))
+        .find(|r| !matches!(r, Err(RejectReason::Framing | RejectReason::Crc)))
+}
+
+/// Checks one answer of the decoder against [`reference`]: a frame with a good CRC ending at the
+/// last byte is delivered there; otherwise at most a framing or CRC error, and only at a 0x00 that
+/// ends a non-empty run.
+pub(crate) fn check_against_reference(stream: &[u8], got: Option<Result<Msg, RejectReason>>) {
+    match reference(stream) {
+        Some(want) => check!(
+            got == Some(want),
+            "no frame held back: a frame with a good CRC is delivered at its 0x00"
+        ),
+        None => {
+            check!(
+                matches!(
+                    got,
+                    None | Some(Err(RejectReason::Framing | RejectReason::Crc))
+                ),
+                "nothing but a framing or CRC error where no frame ends"
+            );
+            let answers = matches!(stream, [.., b, 0] if *b != 0);
+            check!(
+                got.is_some() == answers,
+                "an answer exactly at each 0x00 ending a non-empty run"
+            );
+        }
+    }
+}
+
+/// Garbage bytes before the frame. Under Kani one byte of any value (zero or not: the frame then
+/// follows a 0x00 or merges with a run; more bytes made the proof run for many minutes): garbage
+/// of any length is covered by induction, `check_robust_push_step` proving from any state that
+/// the decoder keeps exactly the last non-zero bytes of the run. The twin draws up to 3 frames'
+/// worth, biased toward zeros and the frame's own bytes.
+const GARBAGE: usize = if cfg!(kani) { 1 } else { 3 * FRAME };
+
+/// No valid frame is held back by the bytes before it: any garbage, then a frame, fed byte by
+/// byte, gives at every byte what the [`reference`] says, and the frame is delivered at its 0x00.
+/// Under Kani the frame is the harnesses' sample command; the twin takes any command.
+pub(crate) fn check_robust_holds_back_no_frame(src: &mut impl Source) {
+    let m = if cfg!(kani) { sample() } else { any_msg(src) };
+    let mut frame = [0u8; ROBUST_BUF];
+    check!(
+        m.encode_robust(&mut frame) == Some(FRAME),
+        "every frame has the fixed length"
     );
+    let mut stream = [0u8; GARBAGE + FRAME];
+    let n = if cfg!(kani) {
+        GARBAGE
+    } else {
+        usize::from(src.u16_below(GARBAGE as u16 + 1))
+    };
+    let garbage: [u8; GARBAGE] = src.bytes();
+    stream[..GARBAGE].copy_from_slice(&garbage);
+    if !cfg!(kani) {
+        for (i, b) in stream[..n].iter_mut().enumerate() {
+            *b = match src.below(8) {
+                0 => 0,
+                1 | 2 => frame[i % FRAME],
+                _ => *b,
+            };
+        }
+    }
+    stream[n..n + FRAME].copy_from_slice(&frame[..FRAME]);
+    let mut dec = RobustDecoder::<N>::new();
+    let mut last = None;
+    for end in 1..=n + FRAME {
+        let got = dec.push(stream[end - 1]);
+        check_against_reference(&stream[..end], got);
+        last = got;
+    }
+    check!(
+        last == Some(Ok(m)),
+        "a valid frame after any garbage is delivered at its 0x00"
+    );
+    let run = stream[..n].iter().rev().take_while(|&&b| b != 0).count();
+    cover!(src, run > 0, "non-zero garbage right before the frame");
+    cover!(src, n > 0 && run == n, "garbage without a zero");
+    cover!(src, run < n, "a zero in the garbage");
+}
+
+/// The command of the Kani harness [`check_robust_holds_back_no_frame`]: a motor command with
+/// bytes of every kind (zeros, which COBS replaces, and a 0x0A).
+fn sample() -> Msg {
+    CmdMsg {
+        cmd_type: CmdType::Mtrs,
+        is_relative: 0,
+        mtr_angles: [0x0A; N],
+        mtr_speed_deg_s: 30,
+        mtr_accel_deg_s_s: -1,
+        cmd_success: 0,
+    }
 }
 
 /// Data bytes of a robust frame of the harnesses' motor count (the COBS body).
@@ -440,6 +565,15 @@ mod proofs {
         check_robust_push_step(&mut KaniSource);
     }
 
+    /// The property of [`RobustDecoder`] (no valid frame held back), real CRC, any byte before a
+    /// frame of one motor (29 bytes); any longer garbage by induction with
+    /// `verify_robust_push_step`.
+    #[kani::proof]
+    #[kani::unwind(35)]
+    fn verify_robust_holds_back_no_frame() {
+        check_robust_holds_back_no_frame(&mut KaniSource);
+    }
+
     // Pending, each out of memory (9–10 GB) with the field-sensitivity flag. The stream half
     // and the combined totality decode the same symbolic frame twice (a copy in the decoder's
     // buffer and the original), with the real CRC; the whole round trip and the bit flip also
@@ -494,6 +628,11 @@ mod twins {
     #[test]
     fn robust_push_step() {
         Twin::run(0x7E_0007, 50_000, check_robust_push_step).assert_covered(3);
+    }
+
+    #[test]
+    fn robust_holds_back_no_frame() {
+        Twin::run(0x7E_000C, 5_000, check_robust_holds_back_no_frame).assert_covered(3);
     }
 
     #[test]
