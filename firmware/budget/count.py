@@ -236,6 +236,11 @@ def count_call(kind, unit_range, skip_entries, force_load, stats):
         ipsr = reg("xpsr") & 0x1FF
         if kind == "isr" and ipsr != ipsr0:
             break
+        # A handler that returns while its own interrupt is pending again (a timer's next period
+        # passed during an uncounted run-through) tail-chains into itself: the exception number
+        # stays the same and the core is back at the handler's first instruction.
+        if kind == "isr" and n > 0 and reg("pc") == unit_range[0] and reg("sp") >= sp0:
+            break
         n += 1
         chain = chain_at(executed)
         active = set(chain).union(*(c[2] for c in calls))
