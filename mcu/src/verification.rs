@@ -191,6 +191,221 @@ pub fn serial_estop_brakes_at_its_last_byte(src: &mut impl Source) {
     );
 }
 
+/// Seed 004 board: the bytes of one transfer with the motor shutdown bit set, from any ladder state
+/// and whatever else the buffer holds (any version, parity, modes, targets, updates): the transfer's
+/// outcome has the ladder in BRAKE and the motors off, before the handler returns (the seed's
+/// "motors stop within one SPI cycle"; INV-7 at the board's level).
+pub fn pi_spi_shutdown_bit_brakes_in_its_transfer(src: &mut impl Source) {
+    use crate::pi_spi::{PiSpiApp, MOTORS, TUNING};
+    use protocol::pi_spi::{RX_SHUTDOWN_OFFSET, TRANSFER_LEN};
+    use statemachine::{check, Config, Drive, Mode};
+    let ladder = statemachine::harness::arbitrary::ladder::<MOTORS>(src, Config::PI_SPI);
+    let mut safety = crate::Safety::from_ladder(ladder);
+    let was_running = safety.mode() != Mode::Brake;
+    let mut app = PiSpiApp::new(&Config::PI_SPI, &TUNING, 100, 8401);
+    // Under Kani any bytes; the twin also draws well-formed buffers, which random bytes never are.
+    let mut rx: [u8; TRANSFER_LEN] = if !cfg!(kani) && src.bool() {
+        well_formed_transfer(src)
+    } else {
+        src.bytes()
+    };
+    if let Some(b) = rx.get_mut(RX_SHUTDOWN_OFFSET) {
+        *b |= 0b10;
+    }
+    let mut tx = [0u8; TRANSFER_LEN];
+    let o = app.on_transfer(&mut safety, &rx, src.u32(), src.u16(), &mut tx);
+    check!(
+        o.out.mode == Mode::Brake && o.out.drive == Drive::Brake,
+        "the motor shutdown bit latches BRAKE in its own transfer"
+    );
+    check!(o.motors_off, "the handler is told to turn the motors off");
+    cover!(src, was_running, "shutdown while running");
+    cover!(
+        src,
+        o.accepted,
+        "shutdown in a buffer that passed every check"
+    );
+    cover!(src, !o.accepted, "shutdown in a refused buffer");
+}
+
+/// A buffer that passes the version, parity and decoding checks, with small targets in any mode.
+#[cfg(not(kani))]
+fn well_formed_transfer(src: &mut impl Source) -> [u8; protocol::pi_spi::TRANSFER_LEN] {
+    use protocol::pi_spi::{
+        encode_rx, MotorMode, RxBuffer, ServoMode, Shutdown, UpdateFlags, RX_LEN, TRANSFER_LEN,
+    };
+    let mode = |src: &mut dyn FnMut() -> u8| MotorMode::from_raw(src() % 5).unwrap_or_default();
+    let mut next = || src.u8();
+    let rx = RxBuffer {
+        updates: UpdateFlags(next() & UpdateFlags::ALL),
+        system_shutdown: Shutdown {
+            servos: next() & 1 != 0,
+            motors: next() & 1 != 0,
+        },
+        motor_control_mode: [
+            mode(&mut next),
+            mode(&mut next),
+            mode(&mut next),
+            mode(&mut next),
+        ],
+        motor_target: [0, 1, 2, 3].map(|_| i32::from(next() as i8)),
+        motor_goal_position: [0, 1, 2, 3].map(|_| i32::from(next() as i8) * 16),
+        servo_mode: [0, 1, 2, 3].map(|_| ServoMode::from_raw(next() % 3).unwrap_or_default()),
+        servo_pos: [0, 1, 2, 3].map(|_| 600 + u16::from(next()) * 8),
+        ..RxBuffer::default()
+    };
+    let mut out = [0u8; TRANSFER_LEN];
+    if let Some(head) = out.first_chunk_mut::<RX_LEN>() {
+        encode_rx(&rx, head);
+    }
+    out
+}
+#[cfg(kani)]
+fn well_formed_transfer(src: &mut impl Source) -> [u8; protocol::pi_spi::TRANSFER_LEN] {
+    src.bytes()
+}
+
+/// Seed 004 board: a buffer refused by the version check (`version`) or the parity check changes
+/// nothing but counters: no command reaches the ladder, no update flag is taken (gains, servos,
+/// odometry resets), and the drive stays what it was unless its shutdown bit stops the motors.
+pub fn pi_spi_refused_buffer_changes_nothing(src: &mut impl Source, version: bool) {
+    use crate::pi_spi::{PiSpiApp, MOTORS, TUNING};
+    use protocol::pi_spi::{parity_ok, TRANSFER_LEN, TRANSFER_VERSION};
+    use statemachine::{check, Config, Drive, Mode};
+    let ladder = statemachine::harness::arbitrary::ladder::<MOTORS>(src, Config::PI_SPI);
+    let mut safety = crate::Safety::from_ladder(ladder);
+    let mut app = PiSpiApp::new(&Config::PI_SPI, &TUNING, 100, 8401);
+    let mut rx: [u8; TRANSFER_LEN] = src.bytes();
+    if !cfg!(kani) && !version {
+        // The twin aims at the parity check, which random bytes reach once in 256.
+        rx[0] = TRANSFER_VERSION;
+        if parity_ok(u32::from_le_bytes([rx[1], rx[2], rx[3], rx[4]])) {
+            rx[1] ^= 1;
+        }
+    }
+    let [v, u0, u1, u2, u3, shutdown, ..] = rx;
+    let updates = u32::from_le_bytes([u0, u1, u2, u3]);
+    if version {
+        assume!(src, v != TRANSFER_VERSION);
+    } else {
+        assume!(src, v == TRANSFER_VERSION && !parity_ok(updates));
+    }
+    let before = safety.output();
+    let frames = safety.ladder().counters().valid_frames;
+    let gains = app.loops().map(|l| l.gains());
+    let servo = *app.servo();
+    let updates_before = *app.updates();
+    let mut tx = [0u8; TRANSFER_LEN];
+    let o = app.on_transfer(&mut safety, &rx, src.u32(), src.u16(), &mut tx);
+    check!(!o.accepted, "a refused buffer is not accepted");
+    check!(
+        safety.ladder().counters().valid_frames == frames,
+        "a refused buffer is no valid frame"
+    );
+    check!(
+        app.loops().map(|l| l.gains()) == gains,
+        "a refused buffer changes no gain"
+    );
+    check!(
+        app.servo().modes == servo.modes && app.servo().pulses_us == servo.pulses_us,
+        "a refused buffer changes no servo command"
+    );
+    check!(
+        *app.updates() == updates_before,
+        "a refused buffer takes no update flag"
+    );
+    if shutdown & 0b10 == 0 {
+        check!(
+            o.out.drive == before.drive,
+            "without the shutdown bit a refused buffer leaves the drive as it was"
+        );
+    } else {
+        check!(o.out.drive == Drive::Brake, "its shutdown bit still brakes");
+    }
+    cover!(src, before.mode != Mode::Brake, "refused while running");
+    cover!(
+        src,
+        shutdown & 0b10 != 0,
+        "refused buffer with the shutdown bit"
+    );
+    cover!(
+        src,
+        updates & 0x3F != 0,
+        "refused buffer carrying update flags"
+    );
+}
+
+/// Seed 004 board: gains received at run time either are refused whole, or every controller built
+/// from them keeps the limits of its bounds (non-negative, the board's) and so stays inside the
+/// PID's proven bounds: one sample from rest, with any setpoint and measurement, returns
+/// |u| ≤ the bounds' output limit (control's `verify_pid_bounded` covers every later sample).
+pub fn pi_spi_gain_updates_stay_bounded(src: &mut impl Source) {
+    use crate::pi_spi::{gains_from_wire, GainError, POSITION_BOUNDS, SPEED_BOUNDS};
+    use control::Pid;
+    use protocol::pi_spi::assumed::MotorPidSettings;
+    use statemachine::check;
+    // Under Kani any bit patterns; the twin draws mostly from the interesting ranges.
+    let gain = |src: &mut _| {
+        if cfg!(kani) {
+            Source::f32(src)
+        } else {
+            match Source::below(src, 6) {
+                0 => 0.0,
+                1 => f32::from(Source::u16(src)) / 1000.0,
+                2 => f32::from(Source::u16(src)) / 100_000.0,
+                3 => -f32::from(Source::u16(src)),
+                4 => f32::from(Source::u16(src)),
+                _ => Source::f32(src),
+            }
+        }
+    };
+    let mut f4 = || [gain(src), gain(src), gain(src), gain(src)];
+    let s = MotorPidSettings {
+        kp: f4(),
+        ki: f4(),
+        kd: f4(),
+    };
+    let b = if src.bool() {
+        SPEED_BOUNDS
+    } else {
+        POSITION_BOUNDS
+    };
+    let r = gains_from_wire(&s, &b);
+    if let Ok(set) = &r {
+        for g in set {
+            check!(g.is_valid(), "accepted gains have valid limits");
+            check!(
+                g.out_limit == b.out_limit && g.i_limit == b.i_limit,
+                "accepted gains keep the board's limits"
+            );
+            check!(
+                g.kp >= Q::ZERO && g.ki_dt >= Q::ZERO && g.kd_dt >= Q::ZERO,
+                "accepted gains are never negative"
+            );
+            let mut pid = Pid::new(*g);
+            let u = pid.step(Q::from_bits(src.i32()), Q::from_bits(src.i32()));
+            check!(
+                u <= b.out_limit && u >= b.out_limit.saturating_neg(),
+                "a controller from accepted gains stays within its output limit"
+            );
+            check!(pid.is_valid(), "and within its integrator limit");
+        }
+    }
+    cover!(src, r.is_ok(), "gains accepted");
+    cover!(
+        src,
+        r == Err(GainError::NonFinite),
+        "NaN or infinite gain refused"
+    );
+    cover!(
+        src,
+        r == Err(GainError::TooLarge),
+        "gain beyond its bound refused"
+    );
+    #[cfg(not(kani))]
+    cover!(src, r == Err(GainError::Negative), "negative gain refused");
+}
+
 #[cfg(kani)]
 mod proofs {
     use statemachine::harness::KaniSource;
@@ -226,6 +441,30 @@ mod proofs {
     fn verify_serial_estop_brakes_at_its_last_byte() {
         super::serial_estop_brakes_at_its_last_byte(&mut KaniSource);
     }
+
+    #[kani::proof]
+    #[kani::unwind(181)]
+    fn verify_pi_spi_shutdown_bit_brakes_in_its_transfer() {
+        super::pi_spi_shutdown_bit_brakes_in_its_transfer(&mut KaniSource);
+    }
+
+    #[kani::proof]
+    #[kani::unwind(181)]
+    fn verify_pi_spi_wrong_version_changes_nothing() {
+        super::pi_spi_refused_buffer_changes_nothing(&mut KaniSource, true);
+    }
+
+    #[kani::proof]
+    #[kani::unwind(181)]
+    fn verify_pi_spi_wrong_parity_changes_nothing() {
+        super::pi_spi_refused_buffer_changes_nothing(&mut KaniSource, false);
+    }
+
+    #[kani::proof]
+    #[kani::unwind(5)]
+    fn verify_pi_spi_gain_updates_stay_bounded() {
+        super::pi_spi_gain_updates_stay_bounded(&mut KaniSource);
+    }
 }
 
 #[cfg(test)]
@@ -257,5 +496,36 @@ mod twins {
     #[test]
     fn serial_estop_brakes_at_its_last_byte() {
         Twin::run(0x3C_05, 20_000, super::serial_estop_brakes_at_its_last_byte).assert_covered(2);
+    }
+
+    #[test]
+    fn pi_spi_shutdown_bit_brakes_in_its_transfer() {
+        Twin::run(
+            0x3C_06,
+            20_000,
+            super::pi_spi_shutdown_bit_brakes_in_its_transfer,
+        )
+        .assert_covered(3);
+    }
+
+    #[test]
+    fn pi_spi_wrong_version_changes_nothing() {
+        Twin::run(0x3C_07, 20_000, |s| {
+            super::pi_spi_refused_buffer_changes_nothing(s, true)
+        })
+        .assert_covered(3);
+    }
+
+    #[test]
+    fn pi_spi_wrong_parity_changes_nothing() {
+        Twin::run(0x3C_08, 20_000, |s| {
+            super::pi_spi_refused_buffer_changes_nothing(s, false)
+        })
+        .assert_covered(3);
+    }
+
+    #[test]
+    fn pi_spi_gain_updates_stay_bounded() {
+        Twin::run(0x3C_09, 100_000, super::pi_spi_gain_updates_stay_bounded).assert_covered(4);
     }
 }
