@@ -169,8 +169,7 @@ fn spin_in_place_whole_turns_return_to_start() {
     for turn in 0..5u32 {
         for quarter in 1..=4u32 {
             let d = rig.steps(1024, spin);
-            let want = f64::from(quarter) * HALF_PI_64;
-            let err = angle_err(d.heading, want);
+            let err = angle_err(d.heading, f64::from(quarter) * HALF_PI_64);
             worst = worst.max(err);
             assert!(err < 1e-5, "turn {turn} quarter {quarter}: {d:?}");
             assert_eq!((d.pos_x, d.pos_y), (0.0, 0.0), "no translation");
@@ -178,11 +177,38 @@ fn spin_in_place_whole_turns_return_to_start() {
     }
     let d = rig.o.data();
     println!("5 turns: heading {:e} rad, worst {worst:e}", d.heading);
+    // What is left is the configuration's own rounding: its f32 numbers are not exactly
+    // r/(2·track) and 2π/4096 (4096 of its periods turn 2π + 1.7·10⁻⁷ rad).
     assert!(d.heading.abs() < 1e-5);
     near(d.wz, t2r / f64::from(DT), 1e-4);
     // And back the other way, through −π.
     let d = rig.steps(5 * 4096, [3, -3, 3, -3]);
-    assert!(d.heading.abs() < 1e-5, "{d:?}");
+    assert!(d.heading.abs() < 1e-7, "{d:?}");
+}
+
+#[test]
+fn heading_wraps_without_drift_over_many_turns() {
+    // Numbers exact in f32 (1 rad per rad, 2⁻¹⁰ rad per count, 1000 counts a period), so every
+    // period turns exactly 0.9765625 rad and the expected heading is that times n, wrapped with
+    // the true π. A 2π applied as the f32 `TAU` alone would leave 1.7·10⁻⁷ rad per turn:
+    // 2.7·10⁻⁴ rad after these 1554 turns.
+    let k = KinematicsConfig {
+        inverse: [[0.0; 4], [0.0; 4], [1.0, 0.0, 0.0, 0.0]],
+        ticks_to_rad: [1.0 / 1024.0; 4],
+    };
+    for sign in [1, -1] {
+        let mut rig = Rig::new(k, [0; 4]);
+        let mut worst: f64 = 0.0;
+        for n in 1..=10_000u32 {
+            let d = rig.step([sign * 1000, 0, 0, 0]);
+            assert!(d.heading > -PI && d.heading <= PI);
+            let err = angle_err(d.heading, f64::from(sign) * f64::from(n) * 0.976_562_5);
+            worst = worst.max(err);
+        }
+        println!("1554 turns ({sign}): worst heading error {worst:e} rad");
+        assert!(worst < 2e-7, "{worst:e}");
+        assert_eq!(rig.o.counters().large_rotations, 0);
+    }
 }
 
 /// Left wheels 17 counts, right 23, t2r = π/2000: v·dt = r/4·80·t2r = t2r and
