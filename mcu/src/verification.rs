@@ -194,7 +194,8 @@ pub fn serial_estop_brakes_at_its_last_byte(src: &mut impl Source) {
 }
 
 /// Any `KinematicsConfig` the odometry accepts: drawn numbers within the bounds are kept, the others
-/// are folded onto accepted ones, so every accepted configuration is reachable (under Kani, all).
+/// are folded onto accepted constants, so every accepted configuration is reachable (under Kani,
+/// all) and the solver meets no arithmetic on the drawn numbers.
 fn accepted_kinematics(src: &mut impl Source) -> protocol::pi_spi::assumed::KinematicsConfig {
     use crate::odometry::{MAX_LINEAR_GAIN, MAX_TICKS_TO_RAD, MAX_YAW_GAIN, MIN_TICKS_TO_RAD};
     let mut k = protocol::pi_spi::assumed::KinematicsConfig::default();
@@ -207,8 +208,10 @@ fn accepted_kinematics(src: &mut impl Source) -> protocol::pi_spi::assumed::Kine
             let v = src.f32();
             *a = if v.is_finite() && v.abs() <= max {
                 v
+            } else if src.bool() {
+                0.5
             } else {
-                f32::from(src.u8() as i8) / 16.0
+                -0.25
             };
         }
     }
@@ -216,8 +219,10 @@ fn accepted_kinematics(src: &mut impl Source) -> protocol::pi_spi::assumed::Kine
         let v = src.f32();
         *t = if v.is_finite() && v.abs() >= MIN_TICKS_TO_RAD && v.abs() <= MAX_TICKS_TO_RAD {
             v
+        } else if src.bool() {
+            0.01
         } else {
-            (f32::from(src.u8()) + 1.0) / 64.0
+            -1.5
         };
     }
     if k.inverse.iter().flatten().all(|a| *a == 0.0) {
