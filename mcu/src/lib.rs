@@ -58,6 +58,7 @@ pub use current::{Calibration, CalibrationError, CurrentLoop, CurrentSample};
 pub use estop::EstopInput;
 pub use hw::Bridge;
 pub use link::LinkTask;
+pub use odometry::{KinematicsError, Odometry};
 pub use safety::Safety;
 pub use speed::{SpeedLoop, SpeedSample};
 pub use statemachine::Speed;

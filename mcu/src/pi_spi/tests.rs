@@ -512,3 +512,68 @@ fn feedback_carries_time_inputs_and_counts() {
     assert_eq!(fb.digital_sensors, 0x0405);
     assert_eq!(fb.motor.position, [10, -20, 30, -40]);
 }
+
+#[test]
+fn odometry_is_zero_until_configured_then_follows_the_wheels_and_resets() {
+    use protocol::pi_spi::assumed::KinematicsConfig;
+    let mut b = Board::new();
+    let mav = RxBuffer {
+        motor_control_mode: modes(MotorMode::Mav),
+        motor_target: [720; 4],
+        ..RxBuffer::default()
+    };
+    b.arm(&mav);
+    stream(&mut b, &mav, 500);
+    let fb = b.transfer_bytes(&bytes(&mav)).1;
+    assert_eq!(
+        fb.odometry,
+        protocol::pi_spi::OdometryData::default(),
+        "zero until configured"
+    );
+    // Four wheels of radius 0.05 m all forward: vx = r/4 · Σω; no lateral motion or turn.
+    let k = KinematicsConfig {
+        inverse: [[0.0125; 4], [0.0; 4], [0.0; 4]],
+        ticks_to_rad: [RAD_PER_COUNT; 4],
+    };
+    let cfg = RxBuffer {
+        updates: UpdateFlags(UpdateFlags::KINEMATICS),
+        kinematics: k,
+        ..mav
+    };
+    assert!(b.transfer(&cfg).accepted);
+    let start = b.counts[0];
+    stream(&mut b, &mav, 2000);
+    let fb = b.transfer_bytes(&bytes(&mav)).1;
+    // Odometry runs at 100 Hz: up to 10 ticks of travel may not be integrated yet.
+    let wheel_m = f64::from(b.counts[0] - start) * f64::from(RAD_PER_COUNT) * 0.05;
+    assert!(wheel_m > 0.2, "the wheels turned: {wheel_m} m");
+    assert!(
+        (f64::from(fb.odometry.pos_x) - wheel_m).abs() < 0.01,
+        "{} vs {wheel_m}",
+        fb.odometry.pos_x
+    );
+    assert!(fb.odometry.pos_y.abs() < 1e-6 && fb.odometry.heading.abs() < 1e-6);
+    let reset = RxBuffer {
+        updates: UpdateFlags(UpdateFlags::ODOM_RESET),
+        ..mav
+    };
+    assert!(b.transfer(&reset).accepted);
+    run_plant(&mut b, 10);
+    let fb = b.transfer_bytes(&bytes(&mav)).1;
+    assert!(
+        fb.odometry.pos_x.abs() < 0.01,
+        "reset: {}",
+        fb.odometry.pos_x
+    );
+    // A refused kinematics block is counted and changes nothing.
+    let bad = RxBuffer {
+        updates: UpdateFlags(UpdateFlags::KINEMATICS),
+        kinematics: KinematicsConfig {
+            ticks_to_rad: [f32::NAN; 4],
+            ..k
+        },
+        ..mav
+    };
+    assert!(b.transfer(&bad).accepted);
+    assert_eq!(b.app.updates().kinematics_refused, 1);
+}
