@@ -2,13 +2,16 @@
 //! the ADC trigger, so the link is a pair of host files read and written by semihosting, the
 //! speed loop pends the current loop, and the tick pends the link task and prints a trace line.
 //!
-//! `frames.bin` in QEMU's working directory: one record per watchdog tick,
-//! `tag (1 byte) ‖ frame (FRAME_LEN bytes)`; tag 1 = a transaction carrying that frame, tag 0 = no
-//! transaction in this tick. End of file = the host stopped sending.
-//! `feedback.bin`: every feedback frame the firmware wrote for the next transaction, in order
-//! (what the host would have clocked out on MISO).
-
+//! Seed 000 (`EmuLink<FRAME_LEN>`), in QEMU's working directory: [`FRAMES_FILE`] (`frames.bin`),
+//! one record per watchdog tick, `tag (1 byte) ‖ frame (FRAME_LEN bytes)`; tag 1 = a transaction
+//! carrying that frame, tag 0 = no transaction in this tick. End of file = the host stopped
+//! sending. [`FEEDBACK_FILE`] (`feedback.bin`): every feedback frame the firmware wrote for the
+//! next transaction, in order (what the host would have clocked out on MISO).
+//!
+//! Seed 004 (`EmuLink<TRANSFER_LEN>`): the same record format with `TRANSFER_LEN`-byte transfers,
+//! in [`PI_SPI_TRANSFERS_FILE`] and [`PI_SPI_FEEDBACK_FILE`].
 use super::FRAME_LEN;
+use protocol::pi_spi::TRANSFER_LEN;
 use core::fmt::Write;
 use core::sync::atomic::{AtomicBool, AtomicU32, Ordering};
 use cortex_m_semihosting::{debug, hio, syscall};
@@ -32,14 +35,32 @@ fn open(name: &[u8], mode: usize) -> Option<usize> {
     (fd != usize::MAX).then_some(fd)
 }
 
-/// The emulated link: frames in from `frames.bin`, feedback out to `feedback.bin`.
-pub struct EmuLink {
+/// Seed 000's frames from the host, NUL-terminated for SYS_OPEN.
+pub const FRAMES_FILE: &[u8] = b"frames.bin\0";
+/// Seed 000's feedback frames to the host.
+pub const FEEDBACK_FILE: &[u8] = b"feedback.bin\0";
+/// Seed 004's transfers from the host (Pi → STM32 `RxBuffer`s), NUL-terminated for SYS_OPEN.
+pub const PI_SPI_TRANSFERS_FILE: &[u8] = b"pi_spi_transfers.bin\0";
+/// Seed 004's transfers to the host (the `TxBuffer`s the firmware queued).
+pub const PI_SPI_FEEDBACK_FILE: &[u8] = b"pi_spi_feedback.bin\0";
+
+/// Bytes of the largest record: a tag and the longest transaction of any link.
+const REC_MAX: usize = 1 + if FRAME_LEN > TRANSFER_LEN {
+    FRAME_LEN
+} else {
+    TRANSFER_LEN
+};
+
+/// The emulated link of an `N`-byte transaction: records in from a host file, what the firmware
+/// queued for the next transaction out to another.
+pub struct EmuLink<const N: usize> {
     rx: Option<usize>,
     tx: Option<usize>,
 }
 
-impl EmuLink {
-    /// Opens both files (the peripherals are taken so the board init is the same as on the board).
+impl EmuLink<FRAME_LEN> {
+    /// Opens [`FRAMES_FILE`] and [`FEEDBACK_FILE`] (the peripherals are taken so the board init is
+    /// the same as on the board).
     pub fn new(
         _spi: pac::SPI2,
         _dma: pac::DMA1,
@@ -47,16 +68,43 @@ impl EmuLink {
         _tx: &'static mut [[u8; FRAME_LEN]; 2],
         _rcc: &mut pac::RCC,
     ) -> Self {
+        Self::open_files(FRAMES_FILE, FEEDBACK_FILE)
+    }
+}
+
+impl EmuLink<TRANSFER_LEN> {
+    /// Opens [`PI_SPI_TRANSFERS_FILE`] and [`PI_SPI_FEEDBACK_FILE`] (the peripherals are taken so
+    /// the board init is the same as on the board).
+    pub fn new(
+        _spi: pac::SPI2,
+        _dma: pac::DMA1,
+        _rx: &'static mut [[u8; TRANSFER_LEN]; 2],
+        _tx: &'static mut [[u8; TRANSFER_LEN]; 2],
+        _rcc: &mut pac::RCC,
+    ) -> Self {
+        Self::open_files(PI_SPI_TRANSFERS_FILE, PI_SPI_FEEDBACK_FILE)
+    }
+}
+
+impl<const N: usize> EmuLink<N> {
+    fn open_files(rx: &[u8], tx: &[u8]) -> Self {
         Self {
-            rx: open(b"frames.bin\0", 1),   // "rb"
-            tx: open(b"feedback.bin\0", 5), // "wb"
+            rx: open(rx, 1), // "rb"
+            tx: open(tx, 5), // "wb"
         }
     }
 
+    /// A record (tag and `N` bytes) must fit [`REC_MAX`]; checked when `take_rx` is compiled.
+    const REC_FITS: () = assert!(N < REC_MAX);
+
     /// The next transaction's frame, `None` for a tick without one or after the end of the file.
-    pub fn take_rx(&mut self) -> Option<[u8; FRAME_LEN]> {
+    pub fn take_rx(&mut self) -> Option<[u8; N]> {
+        let () = Self::REC_FITS;
         let fd = self.rx?;
-        let mut rec = [0u8; 1 + FRAME_LEN];
+        // One record, read whole (stable Rust has no `[u8; 1 + N]`: the buffer is the largest
+        // record's, and only its first 1 + N bytes are read).
+        let mut buf = [0u8; REC_MAX];
+        let rec = buf.get_mut(..N.wrapping_add(1))?;
         // SAFETY: SYS_READ writes at most `rec.len()` bytes into `rec` and returns how many it
         // did not read (0 = all).
         let left = unsafe { syscall!(READ, fd, rec.as_mut_ptr(), rec.len()) };
@@ -69,7 +117,7 @@ impl EmuLink {
         if *tag != 1 {
             return None;
         }
-        let mut frame = [0u8; FRAME_LEN];
+        let mut frame = [0u8; N];
         frame.copy_from_slice(body);
         Some(frame)
     }
@@ -79,8 +127,8 @@ impl EmuLink {
         false
     }
 
-    /// Appends the feedback frame to `feedback.bin`.
-    pub fn put_tx(&mut self, frame: &[u8; FRAME_LEN]) {
+    /// Appends the feedback frame to the feedback file.
+    pub fn put_tx(&mut self, frame: &[u8; N]) {
         if let Some(fd) = self.tx {
             // SAFETY: SYS_WRITE reads `frame.len()` bytes from `frame`; nothing is written.
             let _ = unsafe { syscall!(WRITE, fd, frame.as_ptr(), frame.len()) };
