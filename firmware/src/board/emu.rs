@@ -11,10 +11,10 @@
 //! Seed 004 (`EmuLink<TRANSFER_LEN>`): the same record format with `TRANSFER_LEN`-byte transfers,
 //! in [`PI_SPI_TRANSFERS_FILE`] and [`PI_SPI_FEEDBACK_FILE`].
 use super::FRAME_LEN;
-use protocol::pi_spi::TRANSFER_LEN;
 use core::fmt::Write;
 use core::sync::atomic::{AtomicBool, AtomicU32, Ordering};
 use cortex_m_semihosting::{debug, hio, syscall};
+use protocol::pi_spi::TRANSFER_LEN;
 use statemachine::Drive;
 
 type Output = statemachine::Output<{ mcu::AXES }>;
