@@ -51,6 +51,7 @@ mod clock;
 pub mod emu;
 #[cfg(not(feature = "qemu"))]
 pub mod link;
+pub mod pi_spi;
 mod regs;
 pub mod sense;
 pub mod teensy;
