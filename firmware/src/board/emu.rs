@@ -44,13 +44,6 @@ pub const PI_SPI_TRANSFERS_FILE: &[u8] = b"pi_spi_transfers.bin\0";
 /// Seed 004's transfers to the host (the `TxBuffer`s the firmware queued).
 pub const PI_SPI_FEEDBACK_FILE: &[u8] = b"pi_spi_feedback.bin\0";
 
-/// Bytes of the largest record: a tag and the longest transaction of any link.
-const REC_MAX: usize = 1 + if FRAME_LEN > TRANSFER_LEN {
-    FRAME_LEN
-} else {
-    TRANSFER_LEN
-};
-
 /// The emulated link of an `N`-byte transaction: records in from a host file, what the firmware
 /// queued for the next transaction out to another.
 pub struct EmuLink<const N: usize> {
@@ -94,32 +87,24 @@ impl<const N: usize> EmuLink<N> {
         }
     }
 
-    /// A record (tag and `N` bytes) must fit [`REC_MAX`]; checked when `take_rx` is compiled.
-    const REC_FITS: () = assert!(N < REC_MAX);
-
     /// The next transaction's frame, `None` for a tick without one or after the end of the file.
     pub fn take_rx(&mut self) -> Option<[u8; N]> {
-        let () = Self::REC_FITS;
         let fd = self.rx?;
-        // One record, read whole (stable Rust has no `[u8; 1 + N]`: the buffer is the largest
-        // record's, and only its first 1 + N bytes are read).
-        let mut buf = [0u8; REC_MAX];
-        let rec = buf.get_mut(..N.wrapping_add(1))?;
-        // SAFETY: SYS_READ writes at most `rec.len()` bytes into `rec` and returns how many it
-        // did not read (0 = all).
-        let left = unsafe { syscall!(READ, fd, rec.as_mut_ptr(), rec.len()) };
-        if left != 0 {
+        // One record: the tag, then the N bytes that follow it whatever the tag (stable Rust has
+        // no `[u8; 1 + N]`, so the two parts are read one after the other).
+        let mut tag = [0u8; 1];
+        let mut frame = [0u8; N];
+        // SAFETY (both calls): SYS_READ writes at most the given length into the given buffer
+        // and returns how many bytes it did not read (0 = all). The body is read only after a
+        // whole tag.
+        let short = unsafe { syscall!(READ, fd, tag.as_mut_ptr(), tag.len()) } != 0
+            || unsafe { syscall!(READ, fd, frame.as_mut_ptr(), frame.len()) } != 0;
+        if short {
             self.rx = None;
             ENDED.store(true, Ordering::Relaxed);
             return None;
         }
-        let (tag, body) = rec.split_first()?;
-        if *tag != 1 {
-            return None;
-        }
-        let mut frame = [0u8; N];
-        frame.copy_from_slice(body);
-        Some(frame)
+        (tag == [1]).then_some(frame)
     }
 
     /// The emulated link has no chip select: never cut short.
