@@ -1,11 +1,12 @@
-//! The seed 000 link: SPI2 slave with circular double-buffered DMA, one frame per transaction.
+//! The SPI links (seed 000: one `FRAME_LEN`-byte frame per transaction; seed 004: one
+//! `TRANSFER_LEN`-byte exchange): SPI2 slave with circular double-buffered DMA.
 
 use super::regs::*;
-use super::FRAME_LEN;
 use stm32f4xx_hal::pac;
 use stm32f4xx_hal::rcc::Enable;
 
-/// SPI2 slave with circular, double-buffered DMA: one [`FRAME_LEN`]-byte transaction per frame.
+/// SPI2 slave with circular, double-buffered DMA: one `N`-byte transaction per frame
+/// (`N` = [`super::FRAME_LEN`] for seed 000, `protocol::pi_spi::TRANSFER_LEN` for seed 004).
 ///
 /// ```text
 ///  DMA1 stream 3 (RX, ch 0): SPI2 DR → rx[0] / rx[1]  alternately (DBM), transfer-complete IRQ
@@ -17,17 +18,17 @@ use stm32f4xx_hal::rcc::Enable;
 /// frame; the NSS rising edge (EXTI12) checks the receive count and re-arms the link at a frame
 /// boundary ([`SpiLink::resync_if_cut`]), so only the cut frame is lost (counted as a framing
 /// refusal).
-pub struct SpiLink {
+pub struct SpiLink<const N: usize> {
     dma: pac::DMA1,
     spi: pac::SPI2,
-    rx: *mut [[u8; FRAME_LEN]; 2],
-    tx: *mut [[u8; FRAME_LEN]; 2],
+    rx: *mut [[u8; N]; 2],
+    tx: *mut [[u8; N]; 2],
 }
 
 // SAFETY: `SpiLink` is moved once, from `init` into a resource of the two priority-2 link tasks,
 // which never preempt each other; the raw pointers address 'static buffers that only those tasks
 // and the DMA engine touch.
-unsafe impl Send for SpiLink {}
+unsafe impl<const N: usize> Send for SpiLink<N> {}
 
 const DMA_CR_EN: u32 = 1;
 const DMA_CR_TEIE: u32 = 1 << 2;
@@ -44,15 +45,19 @@ const DMA_S3_TEIF: u32 = 1 << 25;
 /// All stream-4 flags in HISR/HIFCR.
 const DMA_S4_FLAGS: u32 = 0x3D;
 
-impl SpiLink {
+impl<const N: usize> SpiLink<N> {
+    /// `N` must fit the DMA stream's 16-bit transfer count (NDTR); checked when `new` is compiled.
+    const LEN_FITS_NDTR: () = assert!(N >= 1 && N <= 0xFFFF);
+
     /// Configures SPI2 as a mode-0 slave and both DMA streams; starts listening.
     pub fn new(
         spi: pac::SPI2,
         dma: pac::DMA1,
-        rx: &'static mut [[u8; FRAME_LEN]; 2],
-        tx: &'static mut [[u8; FRAME_LEN]; 2],
+        rx: &'static mut [[u8; N]; 2],
+        tx: &'static mut [[u8; N]; 2],
         rcc: &mut pac::RCC,
     ) -> Self {
+        let () = Self::LEN_FITS_NDTR;
         pac::SPI2::enable(rcc);
         pac::DMA1::enable(rcc);
         let l = Self { dma, spi, rx, tx };
@@ -82,10 +87,10 @@ impl SpiLink {
         rmw(rcc.apb1rstr(), 1 << 14, 0);
         let spi = &self.spi;
         let dr = spi.dr().as_ptr() as u32;
-        let addr = |p: *mut [[u8; FRAME_LEN]; 2], i: usize| -> u32 {
-            p.cast::<u8>().wrapping_add(i.wrapping_mul(FRAME_LEN)) as u32
+        let addr = |p: *mut [[u8; N]; 2], i: usize| -> u32 {
+            p.cast::<u8>().wrapping_add(i.wrapping_mul(N)) as u32
         };
-        let len = FRAME_LEN as u32;
+        let len = N as u32;
         wr(rx_s.par(), dr);
         wr(rx_s.m0ar(), addr(self.rx, 0));
         wr(rx_s.m1ar(), addr(self.rx, 1));
@@ -122,12 +127,12 @@ impl SpiLink {
     ///
     /// ```text
     ///  NSS   ‾‾\____________________/‾‾‾   complete frame: TC ran first (lower IRQ number),
-    ///  NDTR    64 … 1 → reload 64   ↑      NDTR = 64 at the edge: nothing to do
-    ///  NSS   ‾‾\________/‾‾‾               cut short: NDTR = 64 − k at the edge → re-arm
+    ///  NDTR     N … 1 → reload N    ↑      NDTR = N at the edge: nothing to do
+    ///  NSS   ‾‾\________/‾‾‾               cut short: NDTR = N − k at the edge → re-arm
     /// ```
     pub fn resync_if_cut(&mut self) -> bool {
         let left = self.dma.st(3).ndtr().read().bits() & 0xFFFF;
-        if left == FRAME_LEN as u32 {
+        if left == N as u32 {
             return false;
         }
         self.arm();
@@ -136,7 +141,7 @@ impl SpiLink {
 
     /// Handles the transfer-complete interrupt: copies out the frame just received and returns it,
     /// or `None` after a transfer error (the stream is restarted and the frame is lost).
-    pub fn take_rx(&mut self) -> Option<[u8; FRAME_LEN]> {
+    pub fn take_rx(&mut self) -> Option<[u8; N]> {
         let flags = self.dma.lisr().read().bits();
         wr(self.dma.lifcr(), DMA_S3_FLAGS);
         if flags & DMA_S3_TEIF != 0 {
@@ -146,18 +151,18 @@ impl SpiLink {
         let ct = self.dma.st(3).cr().read().bits() & DMA_CR_CT != 0;
         let done = usize::from(!ct);
         // SAFETY: `rx` points to two 'static buffers; the DMA now writes buffer `ct`, so buffer
-        // `done` is stable until the next transaction completes (≥ 256 µs away at 2 MHz, far
-        // longer than this copy). The read is volatile because the DMA engine wrote it.
-        let frame =
-            unsafe { core::ptr::read_volatile(self.rx.cast::<[u8; FRAME_LEN]>().add(done)) };
+        // `done` is stable until the next transaction completes (N bytes away: ≥ 256 µs for 64
+        // bytes at 2 MHz, far longer than this copy). The read is volatile because the DMA engine
+        // wrote it.
+        let frame = unsafe { core::ptr::read_volatile(self.rx.cast::<[u8; N]>().add(done)) };
         Some(frame)
     }
 
     /// Writes the feedback frame into the TX buffer the DMA is not sending.
-    pub fn put_tx(&mut self, frame: &[u8; FRAME_LEN]) {
+    pub fn put_tx(&mut self, frame: &[u8; N]) {
         let ct = self.dma.st(4).cr().read().bits() & DMA_CR_CT != 0;
         let idle = usize::from(!ct);
         // SAFETY: as in `take_rx`: buffer `idle` is not the DMA's current target.
-        unsafe { core::ptr::write_volatile(self.tx.cast::<[u8; FRAME_LEN]>().add(idle), *frame) };
+        unsafe { core::ptr::write_volatile(self.tx.cast::<[u8; N]>().add(idle), *frame) };
     }
 }

@@ -51,6 +51,7 @@ mod clock;
 pub mod emu;
 #[cfg(not(feature = "qemu"))]
 pub mod link;
+pub mod pi_spi;
 mod regs;
 pub mod sense;
 pub mod teensy;
@@ -71,10 +72,10 @@ use stm32f4xx_hal::pac;
 /// The link peripheral of this image: SPI2 with DMA on the board, frames from a host file under
 /// the emulator (which models neither SPI slave mode nor DMA).
 #[cfg(not(feature = "qemu"))]
-pub type LinkHw = link::SpiLink;
+pub type LinkHw = link::SpiLink<FRAME_LEN>;
 /// The link peripheral of this image: frames from a host file under the emulator.
 #[cfg(feature = "qemu")]
-pub type LinkHw = emu::EmuLink;
+pub type LinkHw = emu::EmuLink<FRAME_LEN>;
 
 /// This board's tuning (the simulator runs the same).
 #[cfg(not(feature = "qemu"))]

@@ -1,5 +1,6 @@
 //! Timers: the 1 kHz tick (TIM2, also the µs clock of the feedback time stamps), the 10 kHz speed
-//! loop (TIM5), and the independent watchdog.
+//! loop (TIM5), the other boards' periodic timers (seed 001: TIM3; seed 004: the TIM7 tick), and
+//! the independent watchdog.
 
 use super::regs::*;
 use super::{IWDG, SPEED_DIV, TICK_DIV};
@@ -39,6 +40,7 @@ macro_rules! periodic {
 periodic!(TIM2, TICK_DIV);
 periodic!(TIM5, SPEED_DIV);
 periodic!(TIM3, super::cdc::IMU_DIV);
+periodic!(TIM7, super::pi_spi::TICK_DIV);
 
 /// The independent watchdog: once started it cannot be stopped; a missing refresh resets the MCU.
 pub struct Iwdg {
