@@ -80,7 +80,6 @@
 //! loss sends one again: BRAKE is never left by transfers that merely resume.
 
 use crate::cdc::{motor_outputs, MotorOutput};
-use crate::estop::EstopInput;
 use crate::imu::ImuFusion;
 use crate::odometry::Odometry;
 use crate::safety::Safety;
@@ -577,6 +576,13 @@ impl PiSpiApp {
         }
     }
 
+    /// A transaction cut short (the chip select rose before the last byte; the link re-armed at a
+    /// transfer boundary): counted as a framing refusal, nothing else changes. The body of
+    /// `spi_nss_rise`.
+    pub fn transfer_cut(&mut self, safety: &mut Safety<MOTORS>) -> Output<MOTORS> {
+        safety.step(Event::Rejected(RejectReason::Framing))
+    }
+
     /// A buffer that passed version, parity and decoding: the servo check, the ladder, then the
     /// one-shot updates. Returns whether the ladder took the command.
     fn take(&mut self, safety: &mut Safety<MOTORS>, cmd: &RxBuffer) -> bool {
@@ -666,17 +672,18 @@ impl PiSpiApp {
     }
 
     /// One watchdog tick (the body of `watchdog_tick`): the ladder's tick, then every motor's loop
-    /// under its drive, the servos, and the feedback for the next transfer. Not inlined, for the
-    /// budget report.
+    /// under its drive, the servos, and the feedback for the next transfer. `estop_pending`: an
+    /// ESTOP press not yet latched ([`crate::EstopInput::press_pending`]) shorts the motors too.
+    /// Not inlined, for the budget report.
     #[inline(never)]
     pub fn tick(
         &mut self,
         safety: &mut Safety<MOTORS>,
-        estop: &EstopInput,
+        estop_pending: bool,
         inputs: &PiSpiTickInputs,
     ) -> PiSpiTickOutcome {
         let out = serial_tick(safety, &inputs.serial);
-        let braked = out.drive == Drive::Brake || estop.press_pending();
+        let braked = out.drive == Drive::Brake || estop_pending;
         let mut duties = [AxisDrive::Coast; MOTORS];
         let mut speeds_cps = [0i32; MOTORS];
         let mut done = 0u8;

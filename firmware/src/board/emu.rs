@@ -151,7 +151,13 @@ pub mod hooks {
             );
         }
         rtic::pend(pac::Interrupt::DMA1_STREAM3);
-        if !ENDED.load(Ordering::Relaxed) || !matches!(out.drive, Drive::Brake) {
+        exit_when_done(tick, matches!(out.drive, Drive::Brake));
+    }
+
+    /// Exits QEMU [`TAIL_TICKS`] ticks after the host file ended with `braked` held (every
+    /// emulated SPI image).
+    pub fn exit_when_done(tick: u32, braked: bool) {
+        if !ENDED.load(Ordering::Relaxed) || !braked {
             ENDED_AT.store(0, Ordering::Relaxed);
             return;
         }

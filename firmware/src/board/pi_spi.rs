@@ -704,3 +704,40 @@ pub fn init(
         dp.DBGMCU,
     )
 }
+
+/// The interrupt vector of the `imu_read` task: UART4 is unused on this board, so the vector is
+/// free; the tick pends it every [`IMU_PERIOD_TICKS`] (the tick is the IMU's timer).
+pub const IMU_IRQ: pac::Interrupt = pac::Interrupt::UART4;
+/// Ticks between two IMU and analog reads (100 Hz).
+pub const IMU_PERIOD_TICKS: u32 = 10;
+
+/// Emulator stand-ins for the triggers QEMU does not model (feature `qemu`): one link transfer
+/// slot per tick from the host file, and the exit once the file ended with BRAKE held.
+#[cfg(feature = "qemu")]
+pub mod hooks {
+    use stm32f4xx_hal::pac;
+
+    /// After a tick: pends the link task (it reads the tick's record) and exits QEMU a few ticks
+    /// after the file ended with the motors `braked`.
+    pub fn after_tick(tick: u32, braked: bool) {
+        rtic::pend(pac::Interrupt::DMA1_STREAM3);
+        super::super::emu::hooks::exit_when_done(tick, braked);
+    }
+
+    /// QEMU does not run TIM7: SysTick at 1 kHz stands in for it (the handler pends TIM7).
+    pub fn start_tick(mut syst: cortex_m::peripheral::SYST) {
+        use cortex_m::peripheral::syst::SystClkSource;
+        syst.set_clock_source(SystClkSource::Core);
+        syst.set_reload(super::super::SYSCLK_HZ / super::TICK_HZ - 1);
+        syst.clear_current();
+        syst.enable_interrupt();
+        syst.enable_counter();
+    }
+}
+
+/// Emulator hooks: nothing on the board (TIM7 ticks, the Pi clocks the transfers).
+#[cfg(not(feature = "qemu"))]
+pub mod hooks {
+    /// After a tick: nothing.
+    pub fn after_tick(_tick: u32, _braked: bool) {}
+}

@@ -1,4 +1,5 @@
 use super::*;
+use crate::estop::EstopInput;
 use protocol::pi_spi::{decode_tx, encode_rx, MotorMode, ServoMode};
 use statemachine::{Config, FaultFlags, Mode};
 
@@ -48,7 +49,8 @@ impl Board {
             counts: self.counts,
             ..PiSpiTickInputs::default()
         };
-        self.app.tick(&mut self.safety, &self.estop, &inputs)
+        self.app
+            .tick(&mut self.safety, self.estop.press_pending(), &inputs)
     }
 
     /// The session start the module documentation prescribes: a shutdown transfer, then `rx`,
