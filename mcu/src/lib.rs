@@ -37,6 +37,7 @@ pub mod cdc;
 pub mod current;
 pub mod estop;
 pub mod hw;
+pub mod imu;
 pub mod link;
 pub mod safety;
 pub mod serial;
