@@ -1,10 +1,10 @@
 //! The seed 004 board's IMU fusion: MPU6050 raw readings → the `ImuData` of the next `TxBuffer`.
 //!
 //! ```text
-//!  task (priority, rate)      body                      what it does
-//!  imu_read (1, sample_hz)    ImuFusion::update         registers → bias, orientation → Madgwick step → ImuData
-//!                             ImuFusion::sensor_lost    no answer this period → ImuData, every accuracy 0
-//!  spi_dma_done (on flag 2)   ImuFusion::set_orientation  IMU_ORIENTATION: the Pi's 3×3 matrices, refused unless rotations
+//!  called from                      body                        what it does
+//!  the IMU read, once per period    ImuFusion::update           registers → bias, orientation → Madgwick step → ImuData
+//!                                   ImuFusion::sensor_lost      no answer this period → ImuData, every accuracy 0
+//!  a frame with IMU_ORIENTATION     ImuFusion::set_orientation  the Pi's 3×3 matrices, refused unless rotations
 //! ```
 //!
 //! # The filter
@@ -12,10 +12,10 @@
 //! Madgwick's gradient-descent attitude filter from the `ahrs` crate (0.8, MIT, `default-features =
 //! false`: no_std, built on `nalgebra` with `libm`). Chosen over `imu-fusion` (a port of the same
 //! author's later Fusion library, but on the older nalgebra 0.32 and with a much larger API we would
-//! not use) and `dcmimu` (a DCM/Kalman filter, not Madgwick or Mahony): `ahrs` is the small,
-//! maintained implementation of the two filters, its dependency tree is nalgebra's no_std core
-//! (approx, num-traits/-complex/-rational, simba, typenum, libm) and nothing else, and it builds for
-//! `thumbv7em-none-eabihf`. Madgwick over `ahrs`'s Mahony: one gain instead of two, and Mahony's
+//! not use) and `dcmimu` (a DCM/Kalman filter, not Madgwick or Mahony): `ahrs` is a small
+//! implementation of the two filters whose latest release follows the current nalgebra, its
+//! dependency tree is nalgebra's no_std core (approx, num-traits/-complex/-rational, simba, typenum,
+//! libm) and nothing else, and it builds for `thumbv7em-none-eabihf`. Madgwick over `ahrs`'s Mahony: one gain instead of two, and Mahony's
 //! integral term would only duplicate the start-up bias estimate below (with no magnetometer neither
 //! filter can observe a yaw bias).
 //!
@@ -63,17 +63,18 @@
 //!
 //! The attitude level is judged on quasi-static readings only (acceleration magnitude within
 //! 1 g ± 10 %, not saturated): on others the filter's gravity cannot be compared with the
-//! measurement, and the level stays as last judged. A field that would not be finite is sent as
-//! zeros with accuracy 0 (counted in `non_finite`); a filter step that would leave a non-finite
-//! quaternion is undone (counted too).
+//! measurement, and the level stays as last judged. Nothing non-finite is sent: a vector that
+//! would not be finite goes as zeros with accuracy 0, a quaternion as the last one, a heading or a
+//! temperature as 0 (each counted in `non_finite`), and a filter step that would leave a
+//! non-finite quaternion is undone (counted too).
 //!
 //! # A lost reading ([`ImuFusion::sensor_lost`])
 //!
 //! The measured vectors (`gyro`, `accel`, `linear_accel`) are zeros, since nothing was measured; the
-//! estimates (`dmp_quat`, `heading`, `temperature`) are the last ones; every accuracy is 0. The
-//! filter is not stepped, so a rotation during the lost period is missing from the heading for good;
-//! the tilt is found again from gravity, which is why the attitude level drops to 0 until the next
-//! quasi-static reading judges it.
+//! estimates (`dmp_quat`, `heading`, `temperature`) are the last ones (identity, 0 and 0 before the
+//! first reading); every accuracy is 0. The filter is not stepped, so a rotation during the lost
+//! period is missing from the heading for good; the tilt is found again from gravity, which is why
+//! the attitude level drops to 0 until the next quasi-static reading judges it.
 
 use crate::cdc::IMU_SCALE;
 use ahrs::{Ahrs, Madgwick};
@@ -83,10 +84,11 @@ use protocol::pi_spi::ImuData;
 
 /// Standard gravity, m/s².
 pub const G: f32 = 9.806_65;
-/// Madgwick gain after start-up (rad/s of tilt correction per unit gradient): small, so the linear
-/// accelerations of a driving robot tilt the estimate little.
+/// Madgwick gain after start-up: the tilt is corrected at up to 2·β rad/s (here about 6 °/s), slowly
+/// enough that the linear accelerations of a driving robot tilt the estimate little.
 pub const BETA: f32 = 0.05;
-/// Madgwick gain while the gyro bias is being estimated: finds the tilt from gravity within about a second.
+/// Madgwick gain while the gyro bias is being estimated: up to 2 rad/s of tilt correction, so the
+/// tilt is found from gravity within about a second.
 pub const BETA_STARTUP: f32 = 1.0;
 /// Largest peak-to-peak gyro reading per axis, counts, within a still start-up window (2 °/s at ±250 °/s).
 pub const STILL_GYRO_SPAN: i32 = 262;
@@ -177,7 +179,7 @@ pub struct ImuCounters {
     pub gyro_saturated: u32,
     /// Readings whose acceleration could not stand for gravity: the filter stepped on the gyro alone.
     pub accel_rejected: u32,
-    /// Non-finite values caught: a filter step undone, or a field sent as zeros.
+    /// Non-finite values caught: a filter step or orientation turn undone, or a field replaced.
     pub non_finite: u32,
     /// Start-up bias windows restarted because the sensor was not still.
     pub bias_restarts: u32,
