@@ -321,7 +321,7 @@ pub fn parse_hex(s: &str) -> Result<Vec<u8>, String> {
     if !clean.is_ascii() {
         return Err("hex input contains non-ASCII characters; give digits 0-9 a-f only".into());
     }
-    if clean.len() % 2 != 0 {
+    if !clean.len().is_multiple_of(2) {
         return Err(format!(
             "hex input has an odd number of digits ({}); give two digits per byte",
             clean.len()

@@ -238,7 +238,7 @@ impl App for CdcBoard {
         }
         let st = self.status();
         self.link.periodic(&self.safety, &st);
-        if self.ticks % 10 == 0 {
+        if self.ticks.is_multiple_of(10) {
             let (imu, _) =
                 cdc::imu_from_raw(self.ticks, [0, 0, 16_384], 0, [0; 3], &cdc::IMU_SCALE);
             self.link.send_imu(&imu);

@@ -11,7 +11,7 @@
 #[allow(clippy::arithmetic_side_effects)]
 pub const fn timer_divider(clk_hz: u32, rate_hz: u32) -> Option<(u16, u16)> {
     let total = match clk_hz.checked_div(rate_hz) {
-        Some(t) if t >= 1 && clk_hz % rate_hz == 0 => t,
+        Some(t) if t >= 1 && clk_hz.is_multiple_of(rate_hz) => t,
         _ => return None,
     };
     let mut psc: u32 = 1;
@@ -37,7 +37,7 @@ pub const fn center_aligned_arr(clk_hz: u32, pwm_hz: u32) -> Option<u16> {
         _ => return None,
     };
     match clk_hz.checked_div(two_f) {
-        Some(arr) if arr >= 1 && arr <= 65_535 && clk_hz % two_f == 0 => Some(arr as u16),
+        Some(arr) if arr >= 1 && arr <= 65_535 && clk_hz.is_multiple_of(two_f) => Some(arr as u16),
         _ => None,
     }
 }

@@ -83,7 +83,8 @@ pub const AMR: Tuning = Tuning {
     min_runs_per_tick: [18, 9],
 };
 
-const _: () = assert!(AMR.pwm_hz % AMR.speed_hz == 0 && AMR.speed_hz % AMR.tick_hz == 0);
+const _: () =
+    assert!(AMR.pwm_hz.is_multiple_of(AMR.speed_hz) && AMR.speed_hz.is_multiple_of(AMR.tick_hz));
 const _: () = assert!(AMR.pwm_arr().is_some());
 
 impl Tuning {

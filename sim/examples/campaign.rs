@@ -133,7 +133,7 @@ fn work(from: u64, to: u64, progress: bool) -> Tally {
                 t.bridge_beyond_bound += 1;
             }
         }
-        if progress && (i - from + 1) % (n / 20).max(1) == 0 {
+        if progress && (i - from + 1).is_multiple_of((n / 20).max(1)) {
             eprintln!("  {:>3.0} %", 100.0 * (i - from + 1) as f64 / n as f64);
         }
     }

@@ -191,7 +191,7 @@ impl SimBoard {
             self.bridge.tripped = true;
             self.bridge.apply(BridgeState::Brake);
         }
-        if self.step_count % STEPS_PER_TICK == 0 && self.step_count > 0 {
+        if self.step_count.is_multiple_of(STEPS_PER_TICK) && self.step_count > 0 {
             let inputs = TickInputs {
                 meas: self.meas.take_for_tick(),
                 driver_fault: false,
@@ -206,7 +206,7 @@ impl SimBoard {
             rep.ticked = true;
             rep.fed_watchdog = o.feed_watchdog;
         }
-        if self.step_count % 2 == 0 {
+        if self.step_count.is_multiple_of(2) {
             let c = [0, 1].map(|k| counts[k].wrapping_add(self.glitch[k] as u16));
             let s = self.speed.run(c, self.setpoint);
             self.meas.record_speed(&s);

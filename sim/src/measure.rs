@@ -181,7 +181,7 @@ impl<'a> Trace<'a> {
 
     /// True if the tick with this index is traced (and kept for the plots).
     pub fn due(&self, tick_index: u64) -> bool {
-        tick_index % self.every == 0
+        tick_index.is_multiple_of(self.every)
     }
 
     /// Opens a row with the common columns of the ladder at `t`, s; returns the writer for the

@@ -163,7 +163,7 @@ pub const IWDG: (u8, u16) = match iwdg_setting(IWDG_TIMEOUT_MS, LSI_HZ) {
 pub const DEAD_TIME_TICKS: u8 = 84;
 const _: () = assert!(DEAD_TIME_TICKS < 128);
 // The speed loop must run a whole number of times per tick, the current loop per speed sample.
-const _: () = assert!(SPEED_HZ % TICK_HZ == 0 && PWM_HZ % SPEED_HZ == 0);
+const _: () = assert!(SPEED_HZ.is_multiple_of(TICK_HZ) && PWM_HZ.is_multiple_of(SPEED_HZ));
 
 const _: () = assert!(APB2_TIMER_HZ == TUNING.pwm_timer_hz || cfg!(feature = "qemu"));
 

@@ -79,7 +79,7 @@ fn enable_then_frames_drive_the_motors_and_only_low_rate_commands_are_acked() {
     let mut run = |s: &mut Safety<MOTORS>, l: &mut CdcLinkTask, ticks: u32| {
         for _ in 0..ticks {
             out = crate::serial::tick(s, &Default::default());
-            if s.ticks() % 20 == 0 {
+            if s.ticks().is_multiple_of(20) {
                 send(l, s, &pwm([500, -250, 0, 1000], 200));
             }
         }
@@ -211,7 +211,7 @@ fn motor_enable_0_holds_the_motors_off_under_the_stream_until_motor_enable_1() {
         let mut outs = Vec::new();
         for _ in 0..ticks {
             let out = crate::serial::tick(s, &Default::default());
-            if s.ticks() % 20 == 0 {
+            if s.ticks().is_multiple_of(20) {
                 send(l, s, &pwm([500; 4], 200));
             }
             outs.push(out);

@@ -1,0 +1,367 @@
+//! Expected values from the geometry of each case, not from the filter: a level board measures
+//! +1 g on z, a board turned +90° about x measures +1 g on y, a turn at r °/s for t s moves the
+//! heading by r·t.
+
+use super::*;
+
+const HZ: u32 = 100;
+/// +1 g in accelerometer counts.
+const ONE_G: i16 = 16_384;
+/// 10 °/s in gyro counts (131 counts per °/s).
+const TEN_DPS: i16 = 1310;
+/// 25 °C: (25 − 36.53) · 340.
+const TEMP_25C: i16 = -3920;
+
+const LEVEL: [i16; 3] = [0, 0, ONE_G];
+
+/// Feeds `n` identical readings; returns the last output.
+fn run(f: &mut ImuFusion, n: u32, accel: [i16; 3], gyro: [i16; 3]) -> ImuData {
+    let mut out = ImuData::default();
+    for _ in 0..n {
+        out = f.update(accel, gyro, TEMP_25C);
+    }
+    out
+}
+
+/// A fusion past its start-up second, level and still.
+fn started() -> ImuFusion {
+    let mut f = ImuFusion::new(HZ);
+    run(&mut f, HZ, LEVEL, [0; 3]);
+    assert!(f.bias_ready());
+    f
+}
+
+fn close(a: f32, b: f32, tol: f32) -> bool {
+    (a - b).abs() <= tol
+}
+
+/// Gravity's direction in the board frame as the filter sees it: R(q)ᵀ · (0, 0, 1).
+fn up_in_board(q: &QuaternionData) -> [f32; 3] {
+    let (w, x, y, z) = (q.w, q.x, q.y, q.z);
+    [
+        2.0 * (x * z - w * y),
+        2.0 * (y * z + w * x),
+        w * w - x * x - y * y + z * z,
+    ]
+}
+
+fn accuracies(d: &ImuData) -> [i8; 5] {
+    [
+        d.gyro.accuracy,
+        d.accel.accuracy,
+        d.compass.accuracy,
+        d.linear_accel.accuracy,
+        d.accel_velocity.accuracy,
+    ]
+}
+
+#[test]
+fn at_rest_level_converges_to_identity_and_no_linear_accel() {
+    let mut f = ImuFusion::new(HZ);
+    let d = run(&mut f, 5 * HZ, LEVEL, [0; 3]);
+    let q = d.dmp_quat;
+    assert!(close(q.w, 1.0, 1e-3), "{q:?}");
+    assert!(
+        q.x.abs() < 0.01 && q.y.abs() < 0.01 && q.z.abs() < 0.01,
+        "{q:?}"
+    );
+    for v in [d.linear_accel.x, d.linear_accel.y, d.linear_accel.z] {
+        assert!(v.abs() < 0.05, "linear accel {:?}", d.linear_accel);
+    }
+    assert!(close(d.accel.z, G, 0.01), "{:?}", d.accel);
+    assert!(
+        d.heading < 0.5 || d.heading > 359.5,
+        "heading {}",
+        d.heading
+    );
+    assert_eq!(accuracies(&d), [3, 3, 0, 3, 0]);
+    assert!(close(d.temperature, 25.0, 0.01), "{}", d.temperature);
+    assert_eq!(f.counters().readings, 5 * HZ);
+    assert_eq!(f.counters().accel_rejected, 0);
+}
+
+#[test]
+fn gyro_accuracy_is_zero_until_the_bias_is_known() {
+    let mut f = ImuFusion::new(HZ);
+    let bias = [50, -30, 20];
+    for k in 1..HZ {
+        let d = f.update(LEVEL, bias, TEMP_25C);
+        assert_eq!(d.gyro.accuracy, 0, "reading {k}");
+        assert_eq!(d.linear_accel.accuracy, 0, "reading {k}");
+    }
+    let d = f.update(LEVEL, bias, TEMP_25C);
+    assert!(f.bias_ready());
+    assert_eq!(d.gyro.accuracy, 3);
+    // The bias is removed: the still board reads no rotation and keeps its heading.
+    let d = run(&mut f, 10 * HZ, LEVEL, bias);
+    for v in [d.gyro.x, d.gyro.y, d.gyro.z] {
+        assert!(v.abs() < 1e-4, "{:?}", d.gyro);
+    }
+    assert!(
+        d.heading < 0.5 || d.heading > 359.5,
+        "heading {}",
+        d.heading
+    );
+}
+
+#[test]
+fn movement_restarts_the_bias_window() {
+    let mut f = ImuFusion::new(HZ);
+    run(&mut f, HZ / 2, LEVEL, [0; 3]);
+    // A turn at 10 °/s: not still.
+    run(&mut f, 10, LEVEL, [0, 0, TEN_DPS]);
+    assert!(!f.bias_ready());
+    assert!(f.counters().bias_restarts >= 1);
+    run(&mut f, HZ - 1, LEVEL, [0; 3]);
+    assert!(
+        !f.bias_ready(),
+        "the window counts only the still readings since the turn"
+    );
+    run(&mut f, 1, LEVEL, [0; 3]);
+    assert!(f.bias_ready());
+}
+
+#[test]
+fn constant_rate_about_z_moves_heading_clockwise_from_north() {
+    // +10 °/s about z (z up): counter-clockwise seen from above, so the clockwise heading falls:
+    // 4 s → −40°, i.e. 320°.
+    let mut f = started();
+    let d = run(&mut f, 4 * HZ, LEVEL, [0, 0, TEN_DPS]);
+    assert!(close(d.heading, 320.0, 0.5), "heading {}", d.heading);
+    let rate = 10.0f32.to_radians();
+    assert!(close(d.gyro.z, rate, 1e-3), "{:?}", d.gyro);
+    assert_eq!(d.gyro.accuracy, 3);
+    // And back the other way for 8 s: −40° + 80° = 40°.
+    let d = run(&mut f, 8 * HZ, LEVEL, [0, 0, -TEN_DPS]);
+    assert!(close(d.heading, 40.0, 0.5), "heading {}", d.heading);
+}
+
+#[test]
+fn tilt_of_90_deg_about_x_is_found_from_gravity_alone() {
+    // Board turned +90° about x: its y axis points up, so the accelerometer reads +1 g on y.
+    // Expected attitude: q = (cos 45°, sin 45°, 0, 0). No gyro reading says so.
+    let tilted = [0, ONE_G, 0];
+    let h = core::f32::consts::FRAC_1_SQRT_2;
+    // From power-on, within the start-up second and a little more.
+    let mut f = ImuFusion::new(HZ);
+    let d = run(&mut f, 2 * HZ, tilted, [0; 3]);
+    let q = d.dmp_quat;
+    assert!(close(q.w, h, 0.02) && close(q.x, h, 0.02), "{q:?}");
+    assert!(q.y.abs() < 0.02 && q.z.abs() < 0.02, "{q:?}");
+    assert_eq!(d.linear_accel.accuracy, 3);
+    // After start-up, level, then tipped over with no gyro reading: found with the slow gain.
+    let mut f = started();
+    let d = run(&mut f, 1, tilted, [0; 3]);
+    assert_eq!(d.linear_accel.accuracy, 1, "gravity 90° off the estimate");
+    let d = run(&mut f, 30 * HZ, tilted, [0; 3]);
+    let up = up_in_board(&d.dmp_quat);
+    assert!(close(up[0], 0.0, 0.01) && close(up[1], 1.0, 0.01) && close(up[2], 0.0, 0.01));
+    let q = d.dmp_quat;
+    assert!(close(q.w, h, 0.01) && close(q.x, h, 0.01), "{q:?}");
+    for v in [d.linear_accel.x, d.linear_accel.y, d.linear_accel.z] {
+        assert!(v.abs() < 0.1, "{:?}", d.linear_accel);
+    }
+    assert_eq!(d.linear_accel.accuracy, 3);
+}
+
+/// M · Mᵀ = I and det M = +1, computed here independently of `check_rotation`.
+fn is_proper_rotation(m: [i8; 9]) -> bool {
+    let e = |r: usize, c: usize| i32::from(m[3 * r + c]);
+    for r in 0..3 {
+        for s in 0..3 {
+            let dot: i32 = (0..3).map(|c| e(r, c) * e(s, c)).sum();
+            if dot != i32::from(r == s) {
+                return false;
+            }
+        }
+    }
+    let det = e(0, 0) * (e(1, 1) * e(2, 2) - e(1, 2) * e(2, 1))
+        - e(0, 1) * (e(1, 0) * e(2, 2) - e(1, 2) * e(2, 0))
+        + e(0, 2) * (e(1, 0) * e(2, 1) - e(1, 1) * e(2, 0));
+    det == 1
+}
+
+#[test]
+fn orientation_accepts_exactly_the_24_rotations() {
+    let mut accepted = 0;
+    for code in 0..3u32.pow(9) {
+        let mut m = [0i8; 9];
+        let mut c = code;
+        for v in &mut m {
+            *v = (c % 3) as i8 - 1;
+            c /= 3;
+        }
+        let mut f = ImuFusion::new(HZ);
+        let ok = f.set_orientation(m, IDENTITY).is_ok();
+        assert_eq!(ok, is_proper_rotation(m), "{m:?}");
+        assert_eq!(f.set_orientation(IDENTITY, m).is_ok(), ok, "compass {m:?}");
+        accepted += u32::from(ok);
+    }
+    assert_eq!(accepted, 24);
+}
+
+#[test]
+fn orientation_refuses_a_reflection_a_zero_row_and_a_2() {
+    let mut f = started();
+    let swap_xy = [0, 1, 0, -1, 0, 0, 0, 0, 1];
+    f.set_orientation(swap_xy, IDENTITY).unwrap();
+    let before = f.clone();
+    let reflection = [1, 0, 0, 0, 1, 0, 0, 0, -1];
+    let zero_row = [1, 0, 0, 0, 0, 0, 0, 0, 1];
+    let two = [2, 0, 0, 0, 1, 0, 0, 0, 1];
+    assert_eq!(
+        f.set_orientation(reflection, IDENTITY),
+        Err(OrientationError::GyroReflection)
+    );
+    assert_eq!(
+        f.set_orientation(zero_row, IDENTITY),
+        Err(OrientationError::GyroNotPermutation)
+    );
+    assert_eq!(
+        f.set_orientation(two, IDENTITY),
+        Err(OrientationError::GyroEntry)
+    );
+    assert_eq!(
+        f.set_orientation(IDENTITY, reflection),
+        Err(OrientationError::CompassReflection)
+    );
+    assert_eq!(
+        f.set_orientation(IDENTITY, zero_row),
+        Err(OrientationError::CompassNotPermutation)
+    );
+    assert_eq!(
+        f.set_orientation(IDENTITY, two),
+        Err(OrientationError::CompassEntry)
+    );
+    assert_eq!(f.counters().orientation_refused, 6);
+    assert_eq!(f.orientation(), (swap_xy, IDENTITY));
+    assert_eq!(f.filter.quat, before.filter.quat);
+}
+
+#[test]
+fn orientation_maps_sensor_axes_and_keeps_the_world_frame() {
+    // The sensor is mounted turned: its x axis points up. Board z = sensor x.
+    let sensor_x_up = [0, 0, -1, 0, 1, 0, 1, 0, 0];
+    assert!(is_proper_rotation(sensor_x_up));
+    let mut f = ImuFusion::new(HZ);
+    f.set_orientation(sensor_x_up, IDENTITY).unwrap();
+    let d = run(&mut f, 3 * HZ, [ONE_G, 0, 0], [0; 3]);
+    let q = d.dmp_quat;
+    assert!(close(q.w, 1.0, 1e-3), "the board is level: {q:?}");
+    // A turn of the sensor about its x axis is a turn of the board about z.
+    let d = run(&mut f, 2 * HZ, [ONE_G, 0, 0], [TEN_DPS, 0, 0]);
+    assert!(close(d.heading, 340.0, 0.5), "heading {}", d.heading);
+
+    // At rest, a new orientation: world vectors go on unchanged, the heading jumps with the axes.
+    let mut f = started();
+    run(&mut f, HZ, LEVEL, [0; 3]);
+    let before = f.update(LEVEL, [0; 3], TEMP_25C);
+    // Board x = sensor y, board y = −sensor x: a quarter turn about z.
+    f.set_orientation([0, 1, 0, -1, 0, 0, 0, 0, 1], IDENTITY)
+        .unwrap();
+    let after = f.update(LEVEL, [0; 3], TEMP_25C);
+    assert!(close(after.accel.z, before.accel.z, 0.01));
+    assert!(after.linear_accel.x.abs() < 0.05 && after.linear_accel.y.abs() < 0.05);
+    assert_eq!(after.linear_accel.accuracy, 3);
+    let turned = (after.heading - before.heading).rem_euclid(360.0);
+    // The new board x is the old board y: a quarter turn counter-clockwise, so the clockwise
+    // heading falls by 90°.
+    assert!(
+        close(turned, 270.0, 0.5),
+        "heading {} → {}",
+        before.heading,
+        after.heading
+    );
+    // Sensor y is board x: a sensor +x reading now reads as board −y. Turning the sensor +10 °/s
+    // about its z (= board z) still turns the board counter-clockwise.
+    let d = run(&mut f, 2 * HZ, LEVEL, [0, 0, TEN_DPS]);
+    let moved = (after.heading - d.heading).rem_euclid(360.0);
+    assert!(close(moved, 20.0, 0.5), "moved {moved}");
+}
+
+#[test]
+fn sensor_lost_has_accuracy_zero_everywhere() {
+    let mut f = started();
+    let d = run(&mut f, 2 * HZ, LEVEL, [0, 0, TEN_DPS]);
+    let lost = f.sensor_lost();
+    assert_eq!(accuracies(&lost), [0; 5]);
+    assert_eq!(lost.gyro, SensorData::default());
+    assert_eq!(lost.accel, SensorData::default());
+    assert_eq!(lost.linear_accel, SensorData::default());
+    assert_eq!(lost.dmp_quat, d.dmp_quat);
+    assert_eq!(lost.heading, d.heading);
+    assert_eq!(lost.temperature, d.temperature);
+    assert_eq!(f.counters().lost, 1);
+    assert_eq!(f.attitude_level(), 0);
+    // Lost before any reading: identity, zeros.
+    let lost = ImuFusion::new(HZ).sensor_lost();
+    assert_eq!(accuracies(&lost), [0; 5]);
+    assert_eq!(lost.dmp_quat.w, 1.0);
+    // The next quasi-static reading judges the attitude again.
+    let d = f.update(LEVEL, [0, 0, 0], TEMP_25C);
+    assert_eq!(d.linear_accel.accuracy, 3);
+}
+
+#[test]
+fn saturation_lowers_accuracy_and_is_counted() {
+    let mut f = started();
+    let d = f.update([i16::MAX, 0, ONE_G], [0; 3], TEMP_25C);
+    assert_eq!(d.accel.accuracy, 1);
+    assert_eq!(d.linear_accel.accuracy, 1);
+    assert_eq!(d.gyro.accuracy, 3);
+    // About z: the clipped rate turns the heading only, so the attitude stays judged settled.
+    let d = f.update(LEVEL, [0, 0, i16::MIN], TEMP_25C);
+    assert_eq!(d.gyro.accuracy, 1);
+    assert_eq!(d.accel.accuracy, 3);
+    let c = f.counters();
+    assert_eq!((c.accel_saturated, c.gyro_saturated), (1, 1));
+    assert_eq!(
+        c.accel_rejected, 1,
+        "a saturated acceleration is not gravity"
+    );
+}
+
+#[test]
+fn temperature_follows_the_datasheet_formula() {
+    let mut f = ImuFusion::new(HZ);
+    for (raw, c) in [
+        (0, 36.53),
+        (340, 37.53),
+        (-12_410, 0.03),
+        (i16::MIN, -59.846_47),
+    ] {
+        let d = f.update(LEVEL, [0; 3], raw);
+        assert!(close(d.temperature, c, 1e-3), "{raw}: {}", d.temperature);
+    }
+}
+
+#[test]
+fn no_non_finite_field_for_random_raw_inputs() {
+    // xorshift64*: many random readings, half of them from the extremes.
+    let mut s = 0x9E37_79B9_7F4A_7C15u64;
+    let mut next = || {
+        s ^= s >> 12;
+        s ^= s << 25;
+        s ^= s >> 27;
+        s.wrapping_mul(0x2545_F491_4F6C_DD1D)
+    };
+    for hz in [0, 1, 100, 1000, u32::MAX] {
+        let mut f = ImuFusion::new(hz);
+        for _ in 0..20_000 {
+            let mut v = [0i16; 7];
+            for x in &mut v {
+                let r = next();
+                *x = match r % 4 {
+                    0 => [i16::MIN, i16::MAX, 0, -1, 1][(r >> 8) as usize % 5],
+                    _ => (r >> 16) as i16,
+                };
+            }
+            let d = if next() % 50 == 0 {
+                f.sensor_lost()
+            } else {
+                f.update([v[0], v[1], v[2]], [v[3], v[4], v[5]], v[6])
+            };
+            super::verification::check_output(&d);
+        }
+    }
+}
