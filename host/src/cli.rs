@@ -1,6 +1,6 @@
 //! The frame tools behind `motorlink decode` and `motorlink encode`: every seed's frames to and from JSON
 //! (and, in [`info`], `motorlink info`: the MCU's identity from a capture or a live link; in
-//! [`device`], the verbs that talk to a serial board).
+//! [`device`], the verbs that talk to a serial board; in [`pi`], the seed 004 verbs over spidev).
 //!
 //! Each function returns the text to print or an error message that names the problem and the fix;
 //! none panics, whatever the input. The JSON shapes are listed in [`SHAPES`] (printed by
@@ -13,6 +13,7 @@ use statemachine::{Estop, RejectReason};
 
 pub mod device;
 pub mod info;
+pub mod pi;
 
 /// The frame kinds of every seed protocol.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]

@@ -1,5 +1,5 @@
 //! `motorlink`: run the simulator, decode/encode frames, monitor and ping a real MCU, drive a serial
-//! board (seed 001) or arm (seed 003).
+//! board (seed 001), an arm (seed 003) or a Raspberry Pi's STM32 over SPI2 (seed 004, `--kind pi-spi`).
 
 use std::path::{Path, PathBuf};
 use std::process::ExitCode;
@@ -23,6 +23,7 @@ macro_rules! out {
 use clap::{Args, Parser, Subcommand, ValueEnum};
 use motorlink::bridge::{Bridge, BridgeConfig};
 use motorlink::cli::device::{self, CdcVerb, DrivePlan, MovePlan, SendHex, TeensyVerb};
+use motorlink::cli::pi;
 use motorlink::cli::{self, FrameKind};
 use motorlink::link::Link;
 use motorlink::pacing::Pacer;
@@ -40,14 +41,14 @@ use statemachine::Estop;
 #[command(
     name = "motorlink",
     version,
-    about = "Host side of the AMR motor controller: simulator, frame tools, device monitor, serial board verbs"
+    about = "Host side of the AMR motor controller: simulator, frame tools, device monitor, serial board verbs, and the Raspberry Pi SPI verbs of seed 004 (ping, monitor, drive --kind pi-spi)"
 )]
 struct Cli {
     #[command(subcommand)]
     cmd: Cmd,
 }
 
-#[derive(Clone, Copy, ValueEnum)]
+#[derive(Clone, Copy, PartialEq, Eq, ValueEnum)]
 enum Kind {
     /// Linux spidev (seed 000), 2 MHz mode 0.
     Spi,
@@ -55,6 +56,8 @@ enum Kind {
     Serial,
     /// Serial to a Teensy speaking seed 003 robust frames (COBS + CRC); monitor only listens.
     Teensy,
+    /// Raspberry Pi spidev to the STM32's SPI2 (seed 004): 179-byte full-duplex transfers, 2 MHz mode 0.
+    PiSpi,
 }
 
 /// The serial link kinds of the board verbs.
@@ -64,6 +67,8 @@ enum SerialKind {
     Serial,
     /// Seed 003 robust frames: ping, move, cal, endeff, config, send-hex.
     Teensy,
+    /// Seed 004 over spidev (the device is /dev/spidevB.C): drive (and ping, monitor).
+    PiSpi,
 }
 
 /// What every board verb takes.
@@ -158,6 +163,12 @@ enum Cmd {
         motors: usize,
     },
     /// Run the 1 kHz bridge disarmed against a device and print feedback and diagnostics.
+    ///
+    /// --kind pi-spi: transfers the board ignores (transferVersion 0) at --hz for --seconds or
+    /// --count transfers, every TxBuffer received printed as a JSON line ({"transfer":k,"tx":{..}};
+    /// one that does not decode: {"transfer":k,"error":"version","version_byte":..,"hint":..},
+    /// counted, never fatal); last line {"verdict":"done"|"no_reply",..}: done if update_time
+    /// advanced. Ctrl-C ends it with the last line.
     Monitor {
         /// Device path (/dev/spidev0.0 or /dev/ttyACM0).
         device: String,
@@ -168,8 +179,14 @@ enum Cmd {
         #[arg(long, visible_alias = "baud")]
         speed: Option<u32>,
         /// How long, s.
-        #[arg(long, default_value_t = 5.0)]
+        #[arg(long, visible_alias = "duration", default_value_t = 5.0)]
         seconds: f64,
+        /// Transfers per second (--kind pi-spi; default 100).
+        #[arg(long)]
+        hz: Option<f64>,
+        /// Stop after this many transfers instead of --seconds (--kind pi-spi).
+        #[arg(long)]
+        count: Option<u64>,
         /// Motors in a seed 003 CmdMsg (--kind teensy).
         #[arg(long, default_value_t = cli::DEFAULT_MOTORS)]
         motors: usize,
@@ -182,6 +199,12 @@ enum Cmd {
     /// off is the safe, idempotent round trip, but it does switch it off). Serial kinds print JSON
     /// lines: {"ping":i,"round_trip_us":..,"reply":{..}} or {"ping":i,"no_reply_ms":..}, then the
     /// verdict with the round-trip statistics; exit status 3 if nothing answered.
+    ///
+    /// --kind pi-spi: at least two transfers, 10 ms apart, of a buffer the board answers but
+    /// ignores (every byte 0: transferVersion 0), so a ping never changes what the robot does. Lines
+    /// {"ping":i,"round_trip_us":..,"tx":{..},"advanced":..} (or "error" and a "hint": all 0x00 or
+    /// 0xFF bytes mean no board), then the verdict: done if update_time advanced, no_reply if
+    /// nothing decoded or the board's timestamp is frozen ("stale":true).
     #[command(after_long_help = VERB_HELP)]
     Ping {
         /// Device path.
@@ -244,25 +267,45 @@ enum Cmd {
     /// "status_motor_enabled":..,"status_estop_latched":..,"imu":..,"ack":..,"other":..,"errors":..,
     /// "last_status":{..}},"decoder":{..},"pacing":{..},"stopped_early":..}. Exit 3 also if a drive
     /// of 0.2 s or more received no valid frame at all (the board sends STATUS every 100 ms).
+    ///
+    /// --kind pi-spi (seed 004, device /dev/spidevB.C): one transfer with the motor shutdown bit
+    /// set and every motor OFF (carrying the one-shot updates --odom-reset, --kinematics,
+    /// --pid-speed, each sent exactly once), then the command buffer (--modes, --targets, --goals,
+    /// --servo-modes, --servo-pos; shutdown bits clear: the bit's 1->0 edge is the board's re-arm)
+    /// at --hz (default 100) for --seconds, then one buffer with both shutdown bits set and every
+    /// motor OFF; that last buffer is also sent on Ctrl-C (SIGINT, SIGTERM, SIGHUP) and after a
+    /// failed transfer. Arguments are checked before the device is opened (exit 2): an enabled
+    /// servo's position must be 600..=2600, a pwm duty within +-399, --hz above 20.4 (the board
+    /// brakes 49 ms after the last valid transfer). Lines: {"sending":{..},..}, then
+    /// {"transfer":k,"tx":{..}} (every --every-th) or {"transfer":k,"error":..}, last
+    /// {"verdict":..,"transfers":{"arm","command","shutdown"},"commanded":[..],"moved":[..],
+    /// "decoded":..,"errors":..,"update_time":{..},"stale":..,"pacing":{..},"interrupted":..}.
+    /// Verdict: no_reply (exit 3) if update_time never advanced (no TxBuffer decoded, or a stale
+    /// board); refused (exit 1) if commands ran for 0.2 s or more, some motor was commanded to move
+    /// and none of those changed motor.position; done (exit 0) otherwise.
     #[command(after_long_help = VERB_HELP)]
     Drive {
         #[command(flatten)]
         link: SerialArgs,
-        /// Duties of motors 1 to 4, -1000 ..= 1000 (full scale), e.g. --pwm 300,-300,0,0.
+        /// Duties of motors 1 to 4, -1000 ..= 1000 (full scale), e.g. --pwm 300,-300,0,0 (required
+        /// for --kind serial).
         #[arg(long, allow_hyphen_values = true)]
-        pwm: String,
-        /// The frame's timeout_ms: the board brakes if no new frame comes within it.
+        pwm: Option<String>,
+        /// The frame's timeout_ms: the board brakes if no new frame comes within it (--kind serial).
         #[arg(long, default_value_t = 200)]
         timeout_ms: u32,
-        /// Frames per second.
-        #[arg(long, default_value_t = 50.0)]
-        hz: f64,
+        /// Frames per second (default 50; --kind pi-spi: transfers per second, default 100).
+        #[arg(long)]
+        hz: Option<f64>,
         /// How long to send, s.
-        #[arg(long, default_value_t = 1.0)]
+        #[arg(long, visible_alias = "duration", default_value_t = 1.0)]
         seconds: f64,
-        /// Re-arm first (MOTOR_ENABLE 1 after the first frame; its ACK is checked).
+        /// Re-arm first (MOTOR_ENABLE 1 after the first frame; its ACK is checked). --kind pi-spi
+        /// always re-arms (the shutdown bit's 1->0 edge).
         #[arg(long)]
         enable: bool,
+        #[command(flatten)]
+        pi: pi::PiDriveArgs,
     },
     /// Seed 003: MTRS to absolute angles at a fixed rate (or once), checking every echo.
     ///
@@ -575,21 +618,46 @@ impl Transport for Boxed {
 /// The default `--speed` of a link kind: SPI 2 MHz, serial 115200 baud.
 fn default_speed(kind: Kind) -> u32 {
     match kind {
-        Kind::Spi => 2_000_000,
+        Kind::Spi | Kind::PiSpi => 2_000_000,
         Kind::Serial | Kind::Teensy => 115_200,
     }
 }
 
-fn monitor(
-    device: &str,
+/// What `monitor` was asked.
+struct MonitorArgs<'a> {
+    device: &'a str,
     kind: Kind,
     speed: Option<u32>,
     seconds: f64,
+    hz: Option<f64>,
+    count: Option<u64>,
+    motors: usize,
+}
+
+fn monitor(a: &MonitorArgs<'_>) -> Result<u8, String> {
+    let (device, kind, seconds, motors) = (a.device, a.kind, a.seconds, a.motors);
+    let speed = a.speed.unwrap_or(default_speed(kind));
+    if kind == Kind::PiSpi {
+        let plan = pi::MonitorPlan::new(a.hz.unwrap_or(pi::DEFAULT_HZ), seconds, a.count)?;
+        let mut dev = SpiTransport::open(device, speed).map_err(|e| e.to_string())?;
+        let v = with_stop(|stop, sink| pi::run_monitor(&mut dev, &plan, stop, sink))?;
+        return Ok(v.exit_code());
+    }
+    if a.hz.is_some() || a.count.is_some() {
+        return Err("--hz and --count are for --kind pi-spi".into());
+    }
+    monitor_other(device, kind, speed, seconds, motors).map(|()| 0)
+}
+
+fn monitor_other(
+    device: &str,
+    kind: Kind,
+    speed: u32,
+    seconds: f64,
     motors: usize,
 ) -> Result<(), String> {
-    let speed = speed.unwrap_or(default_speed(kind));
     match kind {
-        Kind::Spi => {}
+        Kind::Spi | Kind::PiSpi => {}
         Kind::Serial => return monitor_cdc(device, speed, seconds),
         Kind::Teensy => {
             return match motors {
@@ -648,6 +716,10 @@ fn ping(a: &PingArgs<'_>) -> Result<u8, String> {
     let speed = a.speed.unwrap_or(default_speed(a.kind));
     match a.kind {
         Kind::Spi => {}
+        Kind::PiSpi => {
+            let mut dev = SpiTransport::open(device, speed).map_err(|e| e.to_string())?;
+            return Ok(pi::run_ping(&mut dev, count, &mut print_line)?.exit_code());
+        }
         Kind::Serial => {
             let port = open_serial(device, speed)?;
             let v = device::run_cdc(port, &CdcVerb::Ping { count }, a.wait, &mut print_line)?;
@@ -698,9 +770,48 @@ fn print_line(v: Value) {
     out!("{v}");
 }
 
+/// Runs `verb` with a stop flag raised by SIGINT, SIGTERM, SIGHUP or a closed standard output, and a
+/// sink that never exits the process: a paced seed 004 verb must end with its last buffer and line.
+fn with_stop(
+    verb: impl FnOnce(
+        &mut dyn FnMut() -> bool,
+        &mut dyn FnMut(Value),
+    ) -> Result<device::Verdict, String>,
+) -> Result<device::Verdict, String> {
+    let mut signals = pi::Signals::block()?;
+    let closed = std::cell::Cell::new(false);
+    let mut sink = |v: Value| {
+        use std::io::Write as _;
+        if writeln!(std::io::stdout().lock(), "{v}").is_err() {
+            closed.set(true);
+        }
+    };
+    let mut stop = || closed.get() || signals.received();
+    verb(&mut stop, &mut sink)
+}
+
+/// `drive --kind pi-spi`.
+fn pi_drive(
+    link: &SerialArgs,
+    pwm_given: bool,
+    args: &pi::PiDriveArgs,
+    hz: Option<f64>,
+    seconds: f64,
+) -> Result<u8, String> {
+    if pwm_given {
+        return Err("--pwm is the seed 001 drive's; for --kind pi-spi give --modes pwm --targets D (duty -399..=399); nothing was sent".into());
+    }
+    let speed = args.speed.unwrap_or(default_speed(Kind::PiSpi));
+    let open = || SpiTransport::open(&link.device, speed).map_err(|e| e.to_string());
+    let hz = hz.unwrap_or(pi::DEFAULT_HZ);
+    let v = with_stop(|stop, sink| pi::drive(args, hz, seconds, open, stop, sink))?;
+    Ok(v.exit_code())
+}
+
 /// Checks that a verb's `--kind` is the protocol it speaks.
 fn expect_kind(kind: Option<SerialKind>, want: SerialKind, instead: &str) -> Result<(), String> {
     match kind {
+        Some(SerialKind::PiSpi) if want != SerialKind::PiSpi => Err(NOT_PI.into()),
         Some(k) if k != want => Err(instead.to_string()),
         _ => Ok(()),
     }
@@ -722,6 +833,8 @@ fn teensy_verb(link: &SerialArgs, motors: usize, verb: &TeensyVerb) -> Result<u8
 
 const NOT_TEENSY: &str =
     "this verb speaks seed 001 (--kind serial); for a seed 003 arm use move, cal, endeff, config";
+const NOT_PI: &str =
+    "seed 004 (--kind pi-spi) has the verbs ping, monitor and drive (ping and monitor never command the motors)";
 const NOT_SERIAL: &str =
     "this verb speaks seed 003 (--kind teensy); for a seed 001 board use enable, estop, drive";
 
@@ -748,10 +861,18 @@ fn board_verb(cmd: Cmd) -> Result<u8, String> {
             hz,
             seconds,
             enable,
+            pi,
         } => {
+            if link.kind == Some(SerialKind::PiSpi) {
+                return pi_drive(&link, pwm.is_some(), &pi, hz, seconds);
+            }
             expect_kind(link.kind, SerialKind::Serial, NOT_TEENSY)?;
+            if let Some(flag) = pi.first_given() {
+                return Err(format!("{flag} is an option of drive --kind pi-spi; this is a seed 001 drive (--kind serial): give --pwm"));
+            }
+            let pwm = pwm.ok_or("drive --kind serial needs --pwm: the duties of motors 1 to 4, e.g. --pwm 300,-300,0,0")?;
             let pwm = device::parse_list(&pwm, "--pwm")?;
-            let plan = DrivePlan::new(&pwm, timeout_ms, hz, seconds, enable)?;
+            let plan = DrivePlan::new(&pwm, timeout_ms, hz.unwrap_or(50.0), seconds, enable)?;
             cdc_verb(&link, &CdcVerb::Drive(plan))
         }
         Cmd::Move {
@@ -809,6 +930,7 @@ fn board_verb(cmd: Cmd) -> Result<u8, String> {
             match link.kind.unwrap_or(SerialKind::Serial) {
                 SerialKind::Serial => cdc_verb(&link, &CdcVerb::SendHex(h)),
                 SerialKind::Teensy => teensy_verb(&link, motors, &TeensyVerb::SendHex(h)),
+                SerialKind::PiSpi => Err(NOT_PI.into()),
             }
         }
         _ => Err("internal: not a board verb".into()),
@@ -913,8 +1035,18 @@ fn main() -> ExitCode {
             kind,
             speed,
             seconds,
+            hz,
+            count,
             motors,
-        } => monitor(&device, kind, speed, seconds, motors).map(|()| 0),
+        } => monitor(&MonitorArgs {
+            device: &device,
+            kind,
+            speed,
+            seconds,
+            hz,
+            count,
+            motors,
+        }),
         Cmd::Ping {
             device,
             kind,

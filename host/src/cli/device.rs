@@ -269,7 +269,7 @@ impl MovePlan {
 }
 
 /// Period, frame count (the first at t = 0, so ⌈seconds · hz⌉) and duration of a paced verb.
-fn paced_frames(hz: f64, seconds: f64) -> Result<(Duration, u64, Duration), String> {
+pub(super) fn paced_frames(hz: f64, seconds: f64) -> Result<(Duration, u64, Duration), String> {
     if !(hz.is_finite() && hz > 0.0 && hz <= MAX_HZ) {
         return Err(format!(
             "--hz {hz}: give a rate above 0 and at most {MAX_HZ} Hz (the board's tick)"
@@ -297,7 +297,7 @@ pub fn parse_list(s: &str, what: &str) -> Result<Vec<i32>, String> {
 }
 
 /// Spin before each paced deadline ([`Pacer`]); reading stops this much earlier.
-const SPIN: Duration = Duration::from_micros(200);
+pub(super) const SPIN: Duration = Duration::from_micros(200);
 /// Reading stops this long before a paced deadline; the pacer sleeps the rest.
 const READ_MARGIN: Duration = Duration::from_millis(2);
 /// Read wait while only listening (no deadline near).
@@ -308,17 +308,17 @@ const MAX_READ: Duration = Duration::from_millis(50);
 const HEARD_WITHIN: Duration = Duration::from_millis(200);
 
 /// JSON lines with `t_ms` since the verb started.
-struct Lines<'a> {
-    t0: Instant,
-    sink: &'a mut dyn FnMut(Value),
+pub(super) struct Lines<'a> {
+    pub(super) t0: Instant,
+    pub(super) sink: &'a mut dyn FnMut(Value),
 }
 
 impl Lines<'_> {
-    fn ms(&self) -> u64 {
+    pub(super) fn ms(&self) -> u64 {
         u64::try_from(self.t0.elapsed().as_millis()).unwrap_or(u64::MAX)
     }
 
-    fn put(&mut self, v: Value) {
+    pub(super) fn put(&mut self, v: Value) {
         let mut map = match v {
             Value::Object(m) => m,
             other => {
@@ -332,7 +332,7 @@ impl Lines<'_> {
     }
 }
 
-fn us(d: Duration) -> u64 {
+pub(super) fn us(d: Duration) -> u64 {
     u64::try_from(d.as_micros()).unwrap_or(u64::MAX)
 }
 
@@ -348,7 +348,7 @@ fn after(t: Instant, d: Duration) -> Instant {
     t.checked_add(d).unwrap_or(t)
 }
 
-fn pacing_json(stats: &PeriodStats) -> Value {
+pub(super) fn pacing_json(stats: &PeriodStats) -> Value {
     json!({"periods": stats.count, "mean_us": stats.mean_us(), "min_us": stats.min_us,
         "max_us": stats.max_us, "late": stats.late, "skipped": stats.skipped})
 }
