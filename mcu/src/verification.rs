@@ -193,34 +193,89 @@ pub fn serial_estop_brakes_at_its_last_byte(src: &mut impl Source) {
     );
 }
 
-/// Seed 004 board: the bytes of one transfer with the motor shutdown bit set, from any ladder state
-/// and whatever else the buffer holds (any version, parity, modes, targets, updates): the transfer's
-/// outcome has the ladder in BRAKE and the motors off, before the handler returns (the seed's
-/// "motors stop within one SPI cycle"; INV-7 at the board's level).
+/// Any `RxBuffer` the decoder can return. Under Kani every field is symbolic; the twin keeps
+/// targets small so that the ladder accepts some (random bit patterns it almost never does).
+fn any_pi_rx(src: &mut impl Source) -> protocol::pi_spi::RxBuffer {
+    use protocol::pi_spi::assumed::{KinematicsConfig, MotorPidSettings};
+    use protocol::pi_spi::{MotorMode, RxBuffer, ServoMode, Shutdown, UpdateFlags};
+    fn target(src: &mut impl Source) -> i32 {
+        let x = src.i32();
+        if cfg!(kani) {
+            x
+        } else {
+            x % 400
+        }
+    }
+    fn motor(src: &mut impl Source) -> MotorMode {
+        MotorMode::from_raw(src.below(5)).unwrap_or_default()
+    }
+    fn servo(src: &mut impl Source) -> ServoMode {
+        ServoMode::from_raw(src.below(3)).unwrap_or_default()
+    }
+    fn f4(src: &mut impl Source) -> [f32; 4] {
+        [src.f32(), src.f32(), src.f32(), src.f32()]
+    }
+    RxBuffer {
+        updates: UpdateFlags(src.u8() & UpdateFlags::ALL),
+        system_shutdown: Shutdown {
+            servos: src.bool(),
+            motors: src.bool(),
+        },
+        motor_control_mode: [motor(src), motor(src), motor(src), motor(src)],
+        motor_target: [target(src), target(src), target(src), target(src)],
+        motor_goal_position: [target(src), target(src), target(src), target(src)],
+        servo_mode: [servo(src), servo(src), servo(src), servo(src)],
+        servo_pos: [src.u16(), src.u16(), src.u16(), src.u16()],
+        motor_pid_settings: MotorPidSettings {
+            kp: f4(src),
+            ki: f4(src),
+            kd: f4(src),
+        },
+        imu_gyro_orientation: src.bytes::<9>().map(|b| b as i8),
+        imu_compass_orientation: src.bytes::<9>().map(|b| b as i8),
+        kinematics: KinematicsConfig {
+            inverse: [f4(src), f4(src), f4(src)],
+            ticks_to_rad: f4(src),
+        },
+    }
+}
+
+/// Seed 004 board, INV-21: a transfer whose motor shutdown bit is set — whatever the rest of its
+/// bytes, so whatever the decoder made of them: any refusal, or any buffer — leaves the ladder in
+/// BRAKE and tells the handler to turn the motors off before it returns, from any valid ladder
+/// state (the seed's "motors stop within one SPI cycle"; INV-7 at the board's level); its servo
+/// bit stops every servo and cuts the rail there. The bytes half: `shutdown_raw` reads the bits of
+/// byte 5 of any buffer.
 pub fn pi_spi_shutdown_bit_brakes_in_its_transfer(src: &mut impl Source) {
-    use crate::pi_spi::{PiSpiApp, MOTORS, TUNING};
-    use protocol::pi_spi::{RX_SHUTDOWN_OFFSET, TRANSFER_LEN};
+    use crate::pi_spi::{PiSpiApp, ServoOutputs, MOTORS, TUNING};
+    use protocol::pi_spi::{RxBuffer, Shutdown, TRANSFER_LEN};
     use statemachine::{check, Config, Drive, Mode};
     let ladder = statemachine::harness::arbitrary::ladder::<MOTORS>(src, Config::PI_SPI);
     let mut safety = crate::Safety::from_ladder(ladder);
     let was_running = safety.mode() != Mode::Brake;
     let mut app = PiSpiApp::new(&Config::PI_SPI, &TUNING, 100, 8401);
-    // Under Kani any bytes; the twin also draws well-formed buffers, which random bytes never are.
-    let mut rx: [u8; TRANSFER_LEN] = if !cfg!(kani) && src.bool() {
-        well_formed_transfer(src)
-    } else {
-        src.bytes()
+    let raw = Shutdown {
+        servos: src.bool(),
+        motors: true,
     };
-    if let Some(b) = rx.get_mut(RX_SHUTDOWN_OFFSET) {
-        *b |= 0b10;
-    }
+    let decoded: Result<RxBuffer, _> = if src.bool() {
+        Ok(any_pi_rx(src))
+    } else {
+        Err(statemachine::harness::arbitrary::reason(src))
+    };
     let mut tx = [0u8; TRANSFER_LEN];
-    let o = app.on_transfer(&mut safety, &rx, src.u32(), src.u16(), &mut tx);
+    let o = app.apply(&mut safety, raw, decoded, src.u32(), src.u16(), &mut tx);
     check!(
         o.out.mode == Mode::Brake && o.out.drive == Drive::Brake,
         "the motor shutdown bit latches BRAKE in its own transfer"
     );
     check!(o.motors_off, "the handler is told to turn the motors off");
+    if raw.servos {
+        check!(
+            o.servos == ServoOutputs::OFF,
+            "the servo shutdown bit stops every servo and cuts the rail in its own transfer"
+        );
+    }
     cover!(src, was_running, "shutdown while running");
     cover!(
         src,
@@ -230,75 +285,29 @@ pub fn pi_spi_shutdown_bit_brakes_in_its_transfer(src: &mut impl Source) {
     cover!(src, !o.accepted, "shutdown in a refused buffer");
 }
 
-/// A buffer that passes the version, parity and decoding checks, with small targets in any mode.
-#[cfg(not(kani))]
-fn well_formed_transfer(src: &mut impl Source) -> [u8; protocol::pi_spi::TRANSFER_LEN] {
-    use protocol::pi_spi::{
-        encode_rx, MotorMode, RxBuffer, ServoMode, Shutdown, UpdateFlags, RX_LEN, TRANSFER_LEN,
-    };
-    let mode = |src: &mut dyn FnMut() -> u8| MotorMode::from_raw(src() % 5).unwrap_or_default();
-    let mut next = || src.u8();
-    let rx = RxBuffer {
-        updates: UpdateFlags(next() & UpdateFlags::ALL),
-        system_shutdown: Shutdown {
-            servos: next() & 1 != 0,
-            motors: next() & 1 != 0,
-        },
-        motor_control_mode: [
-            mode(&mut next),
-            mode(&mut next),
-            mode(&mut next),
-            mode(&mut next),
-        ],
-        motor_target: [0, 1, 2, 3].map(|_| i32::from(next() as i8)),
-        motor_goal_position: [0, 1, 2, 3].map(|_| i32::from(next() as i8) * 16),
-        servo_mode: [0, 1, 2, 3].map(|_| ServoMode::from_raw(next() % 3).unwrap_or_default()),
-        servo_pos: [0, 1, 2, 3].map(|_| 600 + u16::from(next()) * 8),
-        ..RxBuffer::default()
-    };
-    let mut out = [0u8; TRANSFER_LEN];
-    if let Some(head) = out.first_chunk_mut::<RX_LEN>() {
-        encode_rx(&rx, head);
-    }
-    out
-}
-#[cfg(kani)]
-fn well_formed_transfer(src: &mut impl Source) -> [u8; protocol::pi_spi::TRANSFER_LEN] {
-    src.bytes()
-}
-
-/// Seed 004 board: a buffer refused by the version check (`version`) or the parity check changes
-/// nothing but counters: no command reaches the ladder, no update flag is taken (gains, servos,
-/// odometry resets), and the drive stays what it was unless its shutdown bit stops the motors.
-pub fn pi_spi_refused_buffer_changes_nothing(src: &mut impl Source, version: bool) {
+/// Seed 004 board, INV-22: a transfer the decoder refused (a wrong version or parity — the
+/// protocol crate's `verify_version_and_parity_first` — or any other reason) changes nothing but
+/// counters: no valid frame, no gain, no servo command, no update counter, and the drive stays
+/// what it was unless its shutdown bit stops the motors.
+pub fn pi_spi_refusal_changes_nothing(src: &mut impl Source) {
     use crate::pi_spi::{PiSpiApp, MOTORS, TUNING};
-    use protocol::pi_spi::{parity_ok, TRANSFER_LEN, TRANSFER_VERSION};
-    use statemachine::{check, Config, Drive, Mode};
+    use protocol::pi_spi::{Shutdown, TRANSFER_LEN};
+    use statemachine::{check, Config, Drive, Mode, RejectReason};
     let ladder = statemachine::harness::arbitrary::ladder::<MOTORS>(src, Config::PI_SPI);
     let mut safety = crate::Safety::from_ladder(ladder);
     let mut app = PiSpiApp::new(&Config::PI_SPI, &TUNING, 100, 8401);
-    let mut rx: [u8; TRANSFER_LEN] = src.bytes();
-    if !cfg!(kani) && !version {
-        // The twin aims at the parity check, which random bytes reach once in 256.
-        rx[0] = TRANSFER_VERSION;
-        if parity_ok(u32::from_le_bytes([rx[1], rx[2], rx[3], rx[4]])) {
-            rx[1] ^= 1;
-        }
-    }
-    let [v, u0, u1, u2, u3, shutdown, ..] = rx;
-    let updates = u32::from_le_bytes([u0, u1, u2, u3]);
-    if version {
-        assume!(src, v != TRANSFER_VERSION);
-    } else {
-        assume!(src, v == TRANSFER_VERSION && !parity_ok(updates));
-    }
+    let raw = Shutdown {
+        servos: src.bool(),
+        motors: src.bool(),
+    };
+    let reason = statemachine::harness::arbitrary::reason(src);
     let before = safety.output();
     let frames = safety.ladder().counters().valid_frames;
     let gains = app.loops().map(|l| l.gains());
     let servo = *app.servo();
     let updates_before = *app.updates();
     let mut tx = [0u8; TRANSFER_LEN];
-    let o = app.on_transfer(&mut safety, &rx, src.u32(), src.u16(), &mut tx);
+    let o = app.apply(&mut safety, raw, Err(reason), src.u32(), src.u16(), &mut tx);
     check!(!o.accepted, "a refused buffer is not accepted");
     check!(
         safety.ladder().counters().valid_frames == frames,
@@ -316,25 +325,18 @@ pub fn pi_spi_refused_buffer_changes_nothing(src: &mut impl Source, version: boo
         *app.updates() == updates_before,
         "a refused buffer takes no update flag"
     );
-    if shutdown & 0b10 == 0 {
+    if raw.motors {
+        check!(o.out.drive == Drive::Brake, "its shutdown bit still brakes");
+    } else {
         check!(
             o.out.drive == before.drive,
             "without the shutdown bit a refused buffer leaves the drive as it was"
         );
-    } else {
-        check!(o.out.drive == Drive::Brake, "its shutdown bit still brakes");
     }
     cover!(src, before.mode != Mode::Brake, "refused while running");
-    cover!(
-        src,
-        shutdown & 0b10 != 0,
-        "refused buffer with the shutdown bit"
-    );
-    cover!(
-        src,
-        updates & 0x3F != 0,
-        "refused buffer carrying update flags"
-    );
+    cover!(src, reason == RejectReason::Version, "wrong version");
+    cover!(src, reason == RejectReason::Parity, "wrong parity");
+    cover!(src, raw.motors, "refused buffer with the shutdown bit");
 }
 
 /// Seed 004 board: gains received at run time either are refused whole, or every controller built
@@ -671,22 +673,22 @@ mod proofs {
         super::serial_estop_brakes_at_its_last_byte(&mut KaniSource);
     }
 
+    /// Command validation is INV-5's proven contract here (`statemachine::kani_models`), as in
+    /// the ladder's own harnesses: no symbolic float conversion in this one.
     #[kani::proof]
-    #[kani::unwind(181)]
+    #[kani::unwind(17)]
+    #[kani::stub(
+        statemachine::validate::validate_into,
+        statemachine::kani_models::any_validation
+    )]
     fn verify_pi_spi_shutdown_bit_brakes_in_its_transfer() {
         super::pi_spi_shutdown_bit_brakes_in_its_transfer(&mut KaniSource);
     }
 
     #[kani::proof]
-    #[kani::unwind(181)]
-    fn verify_pi_spi_wrong_version_changes_nothing() {
-        super::pi_spi_refused_buffer_changes_nothing(&mut KaniSource, true);
-    }
-
-    #[kani::proof]
-    #[kani::unwind(181)]
-    fn verify_pi_spi_wrong_parity_changes_nothing() {
-        super::pi_spi_refused_buffer_changes_nothing(&mut KaniSource, false);
+    #[kani::unwind(17)]
+    fn verify_pi_spi_refusal_changes_nothing() {
+        super::pi_spi_refusal_changes_nothing(&mut KaniSource);
     }
 
     #[kani::proof]
@@ -752,26 +754,15 @@ mod twins {
     fn pi_spi_shutdown_bit_brakes_in_its_transfer() {
         Twin::run(
             0x3C_06,
-            20_000,
+            50_000,
             super::pi_spi_shutdown_bit_brakes_in_its_transfer,
         )
         .assert_covered(3);
     }
 
     #[test]
-    fn pi_spi_wrong_version_changes_nothing() {
-        Twin::run(0x3C_07, 20_000, |s| {
-            super::pi_spi_refused_buffer_changes_nothing(s, true)
-        })
-        .assert_covered(3);
-    }
-
-    #[test]
-    fn pi_spi_wrong_parity_changes_nothing() {
-        Twin::run(0x3C_08, 20_000, |s| {
-            super::pi_spi_refused_buffer_changes_nothing(s, false)
-        })
-        .assert_covered(3);
+    fn pi_spi_refusal_changes_nothing() {
+        Twin::run(0x3C_07, 50_000, super::pi_spi_refusal_changes_nothing).assert_covered(4);
     }
 
     #[test]

@@ -774,7 +774,7 @@ pub fn comm_loss_brakes_after_any_prefix<const N: usize>(src: &mut impl Source) 
 // Referenced only by the `kani::stub` attributes, which rustc does not count as uses.
 #[cfg(kani)]
 #[allow(dead_code)]
-pub(crate) mod model {
+pub mod model {
     use crate::types::{AxisMode, Command, RejectReason, Speed};
     use crate::validate::{AxisSetpoint, Setpoint};
     use crate::Config;

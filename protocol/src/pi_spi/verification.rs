@@ -141,6 +141,37 @@ pub(crate) fn check_updates_bit_flip_detected(src: &mut impl Source) {
     cover!(src, bit > 7, "flip of a reserved bit");
 }
 
+/// The checks come first and in the seed's order, for any bytes: a `transferVersion` other than 15
+/// is `Err(Version)` whatever follows it; with version 15, an `updates` word of even parity is
+/// `Err(Parity)` whatever follows it. (The bytes half of the `pi-spi` board's INV-22; the board's
+/// half, a refusal changes nothing, is `mcu`'s `verify_pi_spi_refusal_changes_nothing`.)
+pub(crate) fn check_version_and_parity_first(src: &mut impl Source) {
+    let buf: [u8; RX_LEN] = src.bytes();
+    version_and_parity_of(src, buf);
+}
+
+fn version_and_parity_of(src: &mut impl Source, buf: [u8; RX_LEN]) {
+    use statemachine::check;
+    let [v, u0, u1, u2, u3, ..] = buf;
+    let parity = parity_ok(u32::from_le_bytes([u0, u1, u2, u3]));
+    let r = decode_rx(&buf);
+    if v != TRANSFER_VERSION {
+        check!(
+            r == Err(RejectReason::Version),
+            "a wrong transferVersion is refused as Version"
+        );
+    } else if !parity {
+        check!(
+            r == Err(RejectReason::Parity),
+            "a wrong parity is refused as Parity"
+        );
+    }
+    cover!(src, v != TRANSFER_VERSION, "wrong version");
+    cover!(src, v == TRANSFER_VERSION && !parity, "wrong parity");
+    #[cfg(not(kani))]
+    cover!(src, r.is_ok(), "a buffer that decodes");
+}
+
 /// Kani harnesses (`cargo kani -p protocol --harness pi_spi::`). Every field of the buffers is
 /// symbolic; the writers use one plain loop per array (`le::Writer::f32s` and kin) so that CBMC
 /// unrolls each to its exact length.
@@ -166,6 +197,12 @@ mod proofs {
     fn verify_updates_bit_flip_detected() {
         check_updates_bit_flip_detected(&mut KaniSource);
     }
+
+    #[kani::proof]
+    #[kani::unwind(180)]
+    fn verify_version_and_parity_first() {
+        check_version_and_parity_first(&mut KaniSource);
+    }
 }
 
 #[cfg(test)]
@@ -186,5 +223,27 @@ mod twins {
     #[test]
     fn updates_bit_flip_detected() {
         Twin::run(0x5B_0003, 10_000, check_updates_bit_flip_detected).assert_covered(3);
+    }
+
+    #[test]
+    fn version_and_parity_first() {
+        // Random bytes reach version 15 once in 256 and decode almost never: half the cases are
+        // encoded buffers with one of the first bytes perhaps broken.
+        Twin::run(0x5B_0004, 40_000, |src| {
+            if src.bool() {
+                check_version_and_parity_first(src);
+                return;
+            }
+            let rx = any_rx(src);
+            let mut buf = [0u8; RX_LEN];
+            encode_rx(&rx, &mut buf);
+            match src.below(3) {
+                0 => buf[0] = src.u8(),
+                1 => buf[1 + usize::from(src.below(4))] ^= 1 << src.below(8),
+                _ => {}
+            }
+            version_and_parity_of(src, buf);
+        })
+        .assert_covered(3);
     }
 }
