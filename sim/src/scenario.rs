@@ -1007,7 +1007,7 @@ impl Scenario {
 }
 
 /// The built-in scenarios, embedded so `motorlink sim` works from any directory.
-pub const BUILTIN: [(&str, &str); 16] = [
+pub const BUILTIN: [(&str, &str); 17] = [
     ("nominal", include_str!("../scenarios/nominal.toml")),
     (
         "corruption-1e-4",
@@ -1059,6 +1059,10 @@ pub const BUILTIN: [(&str, &str); 16] = [
     (
         "teensy-arm-angles",
         include_str!("../scenarios/teensy-arm-angles.toml"),
+    ),
+    (
+        "pi-spi-odometry-servos",
+        include_str!("../scenarios/pi-spi-odometry-servos.toml"),
     ),
 ];
 

@@ -376,3 +376,42 @@ fn teensy_joints_reach_their_angles_within_a_step_and_brake_within_250_ms() {
     assert_eq!(s.rearms, 1);
     assert_eq!(s.final_mode, "BRAKE");
 }
+
+/// Seed 004: the Pi's buffers drive a 10 m path; the board's odometry, servos, shutdown bits and
+/// comm-loss BRAKE are checked against the plant and the rules.
+#[test]
+fn pi_spi_odometry_servos_shutdown_and_comm_loss() {
+    let (sc, s, _) = run("pi-spi-odometry-servos");
+    assert_eq!(s.profile, "pi-spi");
+    // Config::PI_SPI: BRAKE at the 49th tick after the last valid transfer, which came up to one
+    // period (10 ms) before the cut; shorted in that tick, strictly within the 50 ms bound.
+    assert_eq!(s.brake_after_last_frame_ticks, Some(49));
+    let ms = s.brake_after_last_frame_ms.unwrap();
+    assert!(ms > 48.0 && ms <= 49.0 + 1e-9, "{ms}");
+    assert_eq!(s.bridge_brake_after_last_frame_ms, Some(ms));
+    // The path is at least the 10 m of the issue.
+    assert!(
+        s.odometry_travel_m.unwrap() >= 10.0,
+        "{:?}",
+        s.odometry_travel_m
+    );
+    // Every shutdown transfer shorted every motor in its own step: the session start, the one
+    // while driving.
+    assert_eq!(s.shutdown_brake_ms, Some(0.0));
+    assert_eq!(s.shutdown_transfers, 2);
+    // Re-arms: the session start and after the shutdown at 24 s; nothing else left BRAKE.
+    assert_eq!(s.rearms, 2);
+    assert_eq!(s.rearm_violations, 0);
+    // Servo outputs checked after every transfer and tick, all as the rules give.
+    assert_eq!(s.servo_violations, Some(0));
+    assert!(s.servo_checks as f64 >= 1000.0 * sc.duration_s);
+    // Corruption happened, all of it refused.
+    assert!(s.corrupted_sent >= 20, "{}", s.corrupted_sent);
+    assert_eq!(s.corrupted_applied, 0);
+    assert_eq!(s.corrupted_rejected, s.corrupted_sent);
+    // Every TxBuffer the host received decoded (version 15).
+    let [ok, bad] = s.replies.unwrap();
+    assert_eq!(bad, 0);
+    assert!(ok as f64 >= 100.0 * 25.4, "{ok}");
+    assert_eq!(s.final_mode, "BRAKE");
+}
