@@ -381,7 +381,21 @@ fn teensy_joints_reach_their_angles_within_a_step_and_brake_within_250_ms() {
 /// comm-loss BRAKE are checked against the plant and the rules.
 #[test]
 fn pi_spi_odometry_servos_shutdown_and_comm_loss() {
-    let (sc, s, _) = run("pi-spi-odometry-servos");
+    let sc = builtin()
+        .unwrap()
+        .into_iter()
+        .find(|s| s.name == "pi-spi-odometry-servos")
+        .unwrap();
+    let s = sim::run(&sc, &mut SimHost::new(), sim::RunOptions::default(), None)
+        .unwrap()
+        .summary;
+    // Every expectation but the odometry's first, so that a wrong odometry module shows as that
+    // one failure at the end.
+    let (odometry, others): (Vec<String>, Vec<String>) = s
+        .check(&sc)
+        .into_iter()
+        .partition(|f| f.starts_with("odometry error"));
+    assert!(others.is_empty(), "{others:#?}\n{s:#?}");
     assert_eq!(s.profile, "pi-spi");
     // Config::PI_SPI: BRAKE at the 49th tick after the last valid transfer, which came up to one
     // period (10 ms) before the cut; shorted in that tick, strictly within the 50 ms bound.
@@ -412,6 +426,10 @@ fn pi_spi_odometry_servos_shutdown_and_comm_loss() {
     // Every TxBuffer the host received decoded (version 15).
     let [ok, bad] = s.replies.unwrap();
     assert_eq!(bad, 0);
-    assert!(ok as f64 >= 100.0 * 25.4, "{ok}");
+    assert!(ok as f64 >= 100.0 * 28.9, "{ok}");
     assert_eq!(s.final_mode, "BRAKE");
+    // The board's odometry at rest after the path: within 1 % of the distance travelled (the
+    // scenario's expectation), and the heading after the 90° arc within a degree.
+    assert!(odometry.is_empty(), "{odometry:#?}");
+    assert!(s.odometry_heading_err_deg.unwrap() < 1.0, "{s:#?}");
 }
