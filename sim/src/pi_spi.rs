@@ -39,7 +39,7 @@ use mcu::pi_spi::{
 use mcu::Safety;
 use protocol::pi_spi::{
     assumed::KinematicsConfig, decode_rx, decode_tx, encode_rx, encode_tx, MotorMode, RxBuffer,
-    ServoMode, Shutdown, TxBuffer, UpdateFlags, RX_LEN, TRANSFER_LEN, TX_LEN,
+    ServoMode, Shutdown, TxBuffer, UpdateFlags, RX_LEN, RX_SHUTDOWN_OFFSET, TRANSFER_LEN, TX_LEN,
 };
 use statemachine::{Config, Drive, Mode, Output};
 
@@ -253,8 +253,8 @@ pub struct ServoRules {
 impl ServoRules {
     /// A transfer reached the board: its raw bytes, and its content if the board took it.
     pub fn transfer(&mut self, raw: &[u8; TRANSFER_LEN], taken: Option<&RxBuffer>) {
-        // systemShutdown is byte 5, the servo bit its bit 0 (seed 004, RxBuffer layout).
-        self.shutdown |= raw[5] & 1 != 0;
+        // The servo bit is bit 0 of systemShutdown.
+        self.shutdown |= raw[RX_SHUTDOWN_OFFSET] & 1 != 0;
         if let Some(rx) = taken {
             self.cmd = Some((rx.servo_mode, rx.servo_pos));
             self.shutdown = rx.system_shutdown.servos;
@@ -540,8 +540,8 @@ pub fn run(
                     }
                     motors_bit = g.system_shutdown.motors;
                 }
-                // The motor shutdown bit as the board's handler reads it (byte 5, bit 1).
-                if bytes[5] & 2 != 0 {
+                // The motor shutdown bit (bit 1 of systemShutdown) as the handler reads it.
+                if bytes[RX_SHUTDOWN_OFFSET] & 2 != 0 {
                     s.shutdown_transfers += 1;
                     shutdown_pending.get_or_insert(t);
                 }
@@ -751,10 +751,10 @@ mod tests {
         assert!(r.expected(Mode::Brake).rail_on);
         // A refused buffer with the servo bit still cuts everything; the next valid one without
         // it restores the command.
-        raw[5] = 1;
+        raw[RX_SHUTDOWN_OFFSET] = 1;
         r.transfer(&raw, None);
         assert_eq!(r.expected(Mode::Normal), ServoOutputs::OFF);
-        raw[5] = 0;
+        raw[RX_SHUTDOWN_OFFSET] = 0;
         rx.servo_mode = [ServoMode::FullyDisabled; 4];
         r.transfer(&raw, Some(&rx));
         assert!(
