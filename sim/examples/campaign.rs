@@ -92,6 +92,7 @@ fn scenario(i: u64) -> Scenario {
         serial: Default::default(),
         cdc: Default::default(),
         teensy: Default::default(),
+        pi_spi: Default::default(),
     }
 }
 

@@ -1,10 +1,12 @@
 //! Software-in-the-loop simulator: the real `statemachine`, `protocol` and `control` code at their
 //! firmware rates, through the board application's task bodies (`mcu`), driven by a simulated host
-//! with fault injection. Three boards: seed 000 (SPI, two DC motors and a differential-drive robot:
+//! with fault injection. Four boards: seed 000 (SPI, two DC motors and a differential-drive robot:
 //! [`board`], [`runner`]), seed 001 (USB CDC / UART, four PWM motors on a skid-steer robot:
-//! [`cdc`], [`skid`]) and seed 003 (UART, a four-joint stepper arm: [`teensy`]); the scenario's
-//! `profile` chooses. What every run measures the same way is in [`measure`]; what the two serial
-//! boards' runs share (the line, the host's frames, the re-arm rule) in [`serial`].
+//! [`cdc`], [`skid`]), seed 003 (UART, a four-joint stepper arm: [`teensy`]) and seed 004 (the
+//! Raspberry Pi's SPI buffers, four encoder motors on the skid-steer robot and four servos:
+//! [`pi_spi`]); the scenario's `profile` chooses. What every run measures the same way is in
+//! [`measure`]; what the two serial boards' runs share (the line, the host's frames, the re-arm
+//! rule) in [`serial`].
 //!
 //! Host-only code: indexing and arithmetic here are on fixed wheel, motor and joint arrays and
 //! floats of a model, and a panic would be a simulator bug, never a robot fault; the MCU-path
@@ -19,6 +21,7 @@ pub mod board;
 pub mod cdc;
 pub mod host;
 pub mod measure;
+pub mod pi_spi;
 pub mod plant;
 pub mod report;
 pub mod rng;

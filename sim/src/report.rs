@@ -11,7 +11,7 @@ fn opt(x: Option<f64>, digits: usize) -> String {
 }
 
 /// Column headers of the summary table. A column that does not apply to a profile shows "-".
-pub const COLUMNS: [&str; 18] = [
+pub const COLUMNS: [&str; 20] = [
     "scenario",
     "profile",
     "result",
@@ -28,6 +28,8 @@ pub const COLUMNS: [&str; 18] = [
     "clock err us",
     "replies decoded/bad",
     "joint err steps",
+    "odometry err % (heading deg)",
+    "servo violations/checks",
     "host reports",
     "speed x real time",
 ];
@@ -59,6 +61,12 @@ fn row(s: &Summary, failures: &[String]) -> Vec<String> {
         s.replies
             .map_or_else(|| "-".to_string(), |[ok, bad]| format!("{ok}/{bad}")),
         opt(s.joint_err_steps, 2),
+        s.odometry_err_pct.map_or_else(
+            || "-".to_string(),
+            |x| format!("{x:.3} ({})", opt(s.odometry_heading_err_deg, 2)),
+        ),
+        s.servo_violations
+            .map_or_else(|| "-".to_string(), |n| format!("{n}/{}", s.servo_checks)),
         s.host_reports
             .iter()
             .map(|(t, n, c)| format!("{n}@{t:.3}s×{c}"))

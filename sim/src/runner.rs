@@ -175,6 +175,26 @@ pub struct Summary {
     pub joint_max_abs_rad: Option<f64>,
     /// Seed 003: step pulses issued after the first comm-loss BRAKE.
     pub steps_after_brake: Option<u64>,
+    /// Seed 004: distance between the board's odometry (`pos_x`, `pos_y` of the last `TxBuffer`
+    /// the host decoded) and the plant's true position at the measuring time, % of the distance
+    /// the robot travelled (the plant's odometer) until then.
+    pub odometry_err_pct: Option<f64>,
+    /// Seed 004: the same distance, m.
+    pub odometry_err_m: Option<f64>,
+    /// Seed 004: |board heading − true heading| at the measuring time, degrees.
+    pub odometry_heading_err_deg: Option<f64>,
+    /// Seed 004: the distance the robot travelled until the measuring time, m.
+    pub odometry_travel_m: Option<f64>,
+    /// Seed 004: servo outputs (after every transfer and every tick) that differ from the rules
+    /// recomputed by the simulator from what reached the board and the ladder's mode.
+    pub servo_violations: Option<u64>,
+    /// Seed 004: servo outputs compared.
+    pub servo_checks: u64,
+    /// Seed 004: for each transfer carrying the motor shutdown bit, the time from the transfer to
+    /// every motor shorted; the largest, ms (0: in the transfer's own step).
+    pub shutdown_brake_ms: Option<f64>,
+    /// Seed 004: transfers with the motor shutdown bit that reached the board.
+    pub shutdown_transfers: u64,
 }
 
 impl Summary {
@@ -285,6 +305,33 @@ impl Summary {
                 )),
             }
         }
+        if let Some(max) = e.max_odometry_error_pct {
+            match self.odometry_err_pct {
+                Some(x) if x <= max => {}
+                other => bad.push(format!(
+                    "odometry error: expected ≤ {max} % of the distance travelled, got {} (board vs plant: {} m over {} m, heading {} deg)",
+                    other.map_or("none".into(), |x| format!("{x:.3} %")),
+                    self.odometry_err_m.map_or("-".into(), |x| format!("{x:.4}")),
+                    self.odometry_travel_m.map_or("-".into(), |x| format!("{x:.3}")),
+                    self.odometry_heading_err_deg.map_or("-".into(), |x| format!("{x:.2}")),
+                )),
+            }
+        }
+        if let Some(max) = e.max_servo_violations {
+            match self.servo_violations {
+                Some(n) if n <= max => {}
+                other => bad.push(format!(
+                    "servo outputs differing from the rules: expected ≤ {max}, got {other:?} of {} checks",
+                    self.servo_checks
+                )),
+            }
+        }
+        if e.shutdown_brakes_in_its_transfer && self.shutdown_brake_ms != Some(0.0) {
+            bad.push(format!(
+                "a motor shutdown transfer must short every motor in its own step: largest {:?} ms over {} shutdown transfers",
+                self.shutdown_brake_ms, self.shutdown_transfers
+            ));
+        }
         if let Some([lo, hi]) = e.brake_after_last_frame_ms {
             match self.brake_after_last_frame_ms {
                 Some(x) if x >= lo && x <= hi => {}
@@ -382,7 +429,8 @@ pub fn corrupt(frame: &mut [u8], rng: &mut Rng) -> bool {
 }
 
 /// Runs `sc` against `host`; writes the CSV trace to `trace` if given. `host` is the seed 000
-/// host; the serial profiles run their own scripted hosts ([`crate::cdc`], [`crate::teensy`]).
+/// host; the other profiles run their own scripted hosts ([`crate::cdc`], [`crate::teensy`],
+/// [`crate::pi_spi`]).
 pub fn run<H: HostModel>(
     sc: &Scenario,
     host: &mut H,
@@ -393,6 +441,7 @@ pub fn run<H: HostModel>(
         Profile::AmrSpi => run_amr(sc, host, opts, trace),
         Profile::Cdc => crate::cdc::run(sc, opts, trace),
         Profile::Teensy => crate::teensy::run(sc, opts, trace),
+        Profile::PiSpi => crate::pi_spi::run(sc, opts, trace),
     }
 }
 

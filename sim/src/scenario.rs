@@ -20,9 +20,12 @@
 //!
 //! `profile` chooses the board: `"amr-spi"` (the default: seed 000, the SPI host and the
 //! differential-drive robot), `"cdc"` (seed 001: four PWM motors, settings in `[cdc]`) or
-//! `"teensy"` (seed 003: a four-joint stepper arm, settings in `[teensy]`). The serial profiles
-//! share the line settings of `[serial]` and accept the faults `link_cut`, `gc_pause` and
-//! `corruption` (of the host's frames); see `cdc-4wd-timeout.toml` and `teensy-arm-angles.toml`.
+//! `"teensy"` (seed 003: a four-joint stepper arm, settings in `[teensy]`) or `"pi-spi"` (seed 004:
+//! the Raspberry Pi's packed buffers over SPI2, four encoder motors of a skid-steer robot and four
+//! servos, settings in `[pi_spi]`). The serial profiles share the line settings of `[serial]`; they
+//! and `pi-spi` accept the faults `link_cut`, `gc_pause` and `corruption` (of the host's frames or
+//! transfers); see `cdc-4wd-timeout.toml`, `teensy-arm-angles.toml` and
+//! `pi-spi-odometry-servos.toml`.
 
 use crate::plant::PlantParams;
 use serde::{Deserialize, Serialize};
@@ -224,6 +227,9 @@ pub enum Profile {
     Cdc,
     /// Seed 003: robust COBS frames over a UART, four stepper joints.
     Teensy,
+    /// Seed 004: the Raspberry Pi's packed `RxBuffer` / `TxBuffer` over SPI2 at 100 Hz, four
+    /// encoder motors in the seed's five modes, four servos, odometry.
+    PiSpi,
 }
 
 impl Profile {
@@ -233,6 +239,7 @@ impl Profile {
             Self::AmrSpi => "amr-spi",
             Self::Cdc => "cdc",
             Self::Teensy => "teensy",
+            Self::PiSpi => "pi-spi",
         }
     }
 
@@ -242,6 +249,7 @@ impl Profile {
             Self::AmrSpi => mcu::tuning::AMR.ladder,
             Self::Cdc => statemachine::Config::CDC,
             Self::Teensy => statemachine::Config::TEENSY,
+            Self::PiSpi => statemachine::Config::PI_SPI,
         }
     }
 }
@@ -441,6 +449,159 @@ fn yes() -> bool {
     true
 }
 
+/// A seed 004 motor mode (`motorControlMode`), as scenarios name it.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum PiMotorMode {
+    /// `MOT_MODE_OFF`: coast.
+    #[default]
+    Off,
+    /// `MOT_MODE_PASSIV_BRAKE`: short brake.
+    PassiveBrake,
+    /// `MOT_MODE_PWM`: `targets` is the duty, −399 ..= 399.
+    Pwm,
+    /// `MOT_MODE_MAV`: `targets` is the velocity, encoder counts per second.
+    Mav,
+    /// `MOT_MODE_MTP`: `goals` is the position, counts; `targets` caps the speed, counts/s.
+    Mtp,
+}
+
+/// A seed 004 servo mode (`servoMode`), as scenarios name it.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum PiServoMode {
+    /// `SERVO_FULLY_DISABLED`: no pulse; the 6 V rail is cut when all four are.
+    #[default]
+    FullyDisabled,
+    /// `SERVO_DISABLED`: no pulse, the rail stays on.
+    Disabled,
+    /// `SERVO_ENABLED`: a pulse of `positions` µs.
+    Enabled,
+}
+
+/// A time window of the seed 004 host's motor command, as the wire carries it.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+pub struct PiSegment {
+    /// Start, s.
+    pub from_s: f64,
+    /// End (exclusive), s.
+    pub to_s: f64,
+    /// Mode of motors 1–4 (m1, m3 left; m2, m4 right).
+    pub modes: [PiMotorMode; 4],
+    /// `motorTarget`: duty (PWM), counts/s (MAV), speed cap in counts/s (MTP).
+    #[serde(default)]
+    pub targets: [i32; 4],
+    /// `motorGoalPosition` (MTP), counts.
+    #[serde(default)]
+    pub goals: [i32; 4],
+}
+
+/// A servo command of the seed 004 host, in force from `at_s` until the next.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+pub struct PiServoCommand {
+    /// From, s.
+    pub at_s: f64,
+    /// Mode of servos 1–4.
+    pub modes: [PiServoMode; 4],
+    /// `servoPos`, timer ticks (µs), 600–2600 for an enabled servo.
+    #[serde(default)]
+    pub positions: [u16; 4],
+}
+
+/// Shutdown bits the seed 004 host sets (`systemShutdown`).
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+pub struct PiShutdown {
+    /// From, s: the first transfer at or after it carries the bits.
+    pub at_s: f64,
+    /// How long every transfer carries them, s; 0 (the default): that one transfer only.
+    #[serde(default)]
+    pub for_s: f64,
+    /// Bit 1, `SHUTDOWN_MOTOR`. The first valid transfer without it afterwards is the re-arm.
+    #[serde(default)]
+    pub motors: bool,
+    /// Bit 0, `SHUTDOWN_SERVO`.
+    #[serde(default)]
+    pub servos: bool,
+}
+
+/// A `KinematicsConfig` as the host sends it.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+pub struct PiKinematics {
+    /// Rows vx, vy, wz; columns wheels 1–4: body twist = inverse × wheel speeds (rad/s).
+    pub inverse: [[f32; 4]; 3],
+    /// Radians per encoder count, wheels 1–4.
+    pub ticks_to_rad: [f32; 4],
+}
+
+/// The seed 004 host and board.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(default)]
+pub struct PiSpiSettings {
+    /// Transfers per second (the seed's 10 ms: 100).
+    pub frame_hz: f64,
+    /// The motor command over time; outside every segment all four motors are `off`.
+    pub segments: Vec<PiSegment>,
+    /// The host ramps each MAV target by at most this many counts/s per transfer (the ladder
+    /// refuses a velocity step beyond 50 rad/s² × the time since the last valid transfer: 114
+    /// counts/s at 100 Hz).
+    pub mav_step_cps: i32,
+    /// Servo commands; before the first, all four fully disabled.
+    pub servos: Vec<PiServoCommand>,
+    /// Shutdown bits.
+    pub shutdown: Vec<PiShutdown>,
+    /// The `KinematicsConfig` sent once, with the `KINEMATICS` flag, at `kinematics_at_s`; none
+    /// (the default): the plant's skid steer (wheel radius r, track b, 1440 counts per
+    /// revolution): vx = r/4 · Σω, wz = r/(2b) · (ω2 + ω4 − ω1 − ω3).
+    pub kinematics: Option<PiKinematics>,
+    /// When the kinematics are sent, s (the first transfer at or after).
+    pub kinematics_at_s: f64,
+    /// When the `ODOM_RESET` flag is sent, s (the first transfer at or after), if ever; the
+    /// odometry is then compared with the plant's pose at that transfer (send it at rest).
+    pub odom_reset_at_s: Option<f64>,
+    /// When the odometry is compared with the plant's pose, s; none: at the end of the run.
+    pub odometry_at_s: Option<f64>,
+    /// The bytes of the `RxBuffer` a `corruption` fault may change, `[start, end)`: the default
+    /// is the whole buffer. The link has no CRC: a change in a target field passes every check.
+    pub corrupt_bytes: [usize; 2],
+}
+
+impl Default for PiSpiSettings {
+    fn default() -> Self {
+        Self {
+            frame_hz: 100.0,
+            segments: Vec::new(),
+            mav_step_cps: 100,
+            servos: Vec::new(),
+            shutdown: vec![PiShutdown {
+                at_s: 0.02,
+                for_s: 0.0,
+                motors: true,
+                servos: false,
+            }],
+            kinematics: None,
+            kinematics_at_s: 0.03,
+            odom_reset_at_s: None,
+            odometry_at_s: None,
+            corrupt_bytes: [0, protocol::pi_spi::RX_LEN],
+        }
+    }
+}
+
+impl PiSpiSettings {
+    /// The segment in force at `t`.
+    pub fn segment_at(&self, t: f64) -> Option<&PiSegment> {
+        self.segments.iter().find(|s| t >= s.from_s && t < s.to_s)
+    }
+
+    /// The servo command in force at `t`.
+    pub fn servo_at(&self, t: f64) -> Option<&PiServoCommand> {
+        self.servos
+            .iter()
+            .filter(|c| c.at_s <= t)
+            .max_by(|a, b| a.at_s.total_cmp(&b.at_s))
+    }
+}
+
 /// Limits the run must respect; checked by [`crate::runner::Summary::check`].
 #[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
 #[serde(default)]
@@ -473,6 +634,14 @@ pub struct Expect {
     pub max_joint_error_steps: Option<f64>,
     /// Seed 003: step pulses issued after the comm-loss BRAKE, at most.
     pub max_steps_after_brake: Option<u64>,
+    /// Seed 004: distance between the board's odometry and the plant's pose at the measuring
+    /// time, at most, % of the distance travelled.
+    pub max_odometry_error_pct: Option<f64>,
+    /// Seed 004: servo outputs (per transfer and per tick) that differ from the rules recomputed
+    /// by the simulator, at most.
+    pub max_servo_violations: Option<u64>,
+    /// Seed 004: every transfer with the motor shutdown bit shorts every motor in its own step.
+    pub shutdown_brakes_in_its_transfer: bool,
 }
 
 /// Host-side settings of a scenario.
@@ -549,6 +718,9 @@ pub struct Scenario {
     /// The seed 003 host (profile `teensy`).
     #[serde(default)]
     pub teensy: TeensySettings,
+    /// The seed 004 host (profile `pi-spi`).
+    #[serde(default)]
+    pub pi_spi: PiSpiSettings,
 }
 
 fn default_seed() -> u64 {
@@ -634,8 +806,80 @@ impl Scenario {
                 }
             }
         }
-        if self.profile != Profile::AmrSpi {
-            self.validate_serial(origin)?;
+        match self.profile {
+            Profile::AmrSpi => {}
+            Profile::PiSpi => self.validate_pi_spi(origin)?,
+            Profile::Cdc | Profile::Teensy => self.validate_serial(origin)?,
+        }
+        Ok(())
+    }
+
+    /// The faults a scripted-host profile takes: `link_cut`, `gc_pause`, `corruption` of the
+    /// host's frames.
+    fn host_faults_only(&self, origin: &str, profiles: &str) -> Result<(), ScenarioError> {
+        for f in &self.faults {
+            match f {
+                Fault::LinkCut { .. } | Fault::GcPause { .. } => {}
+                Fault::Corruption { feedback, .. } if !feedback => {}
+                _ => {
+                    return Err(ScenarioError::Invalid(
+                        origin.into(),
+                        format!("{profiles} take only link_cut, gc_pause and corruption (of the host's frames) faults"),
+                    ))
+                }
+            }
+        }
+        Ok(())
+    }
+
+    fn validate_pi_spi(&self, origin: &str) -> Result<(), ScenarioError> {
+        let bad = |m: &str| Err(ScenarioError::Invalid(origin.into(), format!("pi_spi.{m}")));
+        self.host_faults_only(origin, "the pi-spi profile")?;
+        let p = &self.pi_spi;
+        let time = |t: f64| t.is_finite() && t >= 0.0;
+        if !(1.0..=1000.0).contains(&p.frame_hz) {
+            return bad("frame_hz must be in [1, 1000]");
+        }
+        if p.segments.iter().any(|s| {
+            !time(s.from_s) || s.to_s.partial_cmp(&s.from_s) != Some(core::cmp::Ordering::Greater)
+        }) {
+            return bad("segments need 0 <= from_s < to_s");
+        }
+        if !(1..=100_000).contains(&p.mav_step_cps) {
+            return bad("mav_step_cps must be in [1, 100000]");
+        }
+        if p.servos.iter().any(|c| !time(c.at_s)) {
+            return bad("servos[].at_s must be a time >= 0");
+        }
+        if p.shutdown
+            .iter()
+            .any(|e| !time(e.at_s) || !time(e.for_s) || !(e.motors || e.servos))
+        {
+            return bad("shutdown events need at_s >= 0, for_s >= 0 and motors or servos set");
+        }
+        if p.kinematics.is_some_and(|k| {
+            k.inverse
+                .iter()
+                .flatten()
+                .chain(&k.ticks_to_rad)
+                .any(|x| !x.is_finite())
+        }) {
+            return bad("kinematics must be finite");
+        }
+        if !time(p.kinematics_at_s) || p.odom_reset_at_s.is_some_and(|t| !time(t)) {
+            return bad("kinematics_at_s and odom_reset_at_s must be times >= 0");
+        }
+        if p.odometry_at_s
+            .is_some_and(|t| !(time(t) && t <= self.duration_s))
+        {
+            return bad("odometry_at_s must be within the run");
+        }
+        let [a, b] = p.corrupt_bytes;
+        if !(a < b && b <= protocol::pi_spi::RX_LEN) {
+            return bad(&format!(
+                "corrupt_bytes must be [start, end) with start < end <= {}",
+                protocol::pi_spi::RX_LEN
+            ));
         }
         Ok(())
     }
@@ -652,17 +896,7 @@ impl Scenario {
         if !(0.0..=0.1).contains(&l.bit_error_rate) {
             return bad("serial.bit_error_rate must be in [0, 0.1]");
         }
-        for f in &self.faults {
-            match f {
-                Fault::LinkCut { .. } | Fault::GcPause { .. } => {}
-                Fault::Corruption { feedback, .. } if !feedback => {}
-                _ => {
-                    return bad(
-                        "the serial profiles take only link_cut, gc_pause and corruption (of the host's frames) faults",
-                    )
-                }
-            }
-        }
+        self.host_faults_only(origin, "the serial profiles")?;
         let hz = match self.profile {
             Profile::Cdc => {
                 let c = &self.cdc;
@@ -688,7 +922,7 @@ impl Scenario {
                 }
                 t.frame_hz
             }
-            Profile::AmrSpi => 1000.0,
+            Profile::AmrSpi | Profile::PiSpi => 1000.0,
         };
         if !(1.0..=1000.0).contains(&hz) {
             return bad("frame_hz must be in [1, 1000]");
@@ -703,7 +937,7 @@ impl Scenario {
         let board = f64::from(self.profile.config().comm_loss_bound_ms());
         match self.profile {
             Profile::Cdc => board.min(f64::from(self.cdc.timeout_ms)),
-            Profile::AmrSpi | Profile::Teensy => board,
+            Profile::AmrSpi | Profile::Teensy | Profile::PiSpi => board,
         }
     }
 
@@ -773,7 +1007,7 @@ impl Scenario {
 }
 
 /// The built-in scenarios, embedded so `motorlink sim` works from any directory.
-pub const BUILTIN: [(&str, &str); 16] = [
+pub const BUILTIN: [(&str, &str); 17] = [
     ("nominal", include_str!("../scenarios/nominal.toml")),
     (
         "corruption-1e-4",
@@ -826,6 +1060,10 @@ pub const BUILTIN: [(&str, &str); 16] = [
         "teensy-arm-angles",
         include_str!("../scenarios/teensy-arm-angles.toml"),
     ),
+    (
+        "pi-spi-odometry-servos",
+        include_str!("../scenarios/pi-spi-odometry-servos.toml"),
+    ),
 ];
 
 /// Parses every built-in scenario.
@@ -849,6 +1087,8 @@ mod tests {
                 Profile::Cdc
             } else if name.starts_with("teensy-") {
                 Profile::Teensy
+            } else if name.starts_with("pi-spi-") {
+                Profile::PiSpi
             } else {
                 Profile::AmrSpi
             };
@@ -861,9 +1101,35 @@ mod tests {
             )
         };
         assert!(matches!(
-            with("profile = \"pi-spi\""),
+            with("profile = \"pi-spi-2\""),
             Err(ScenarioError::Parse(..))
         ));
+        assert_eq!(
+            with("profile = \"pi-spi\"").unwrap().profile.config(),
+            statemachine::Config::PI_SPI
+        );
+        // The seed 004 board's settings are checked on load, with the field named.
+        for (extra, field) in [
+            ("[pi_spi]\nframe_hz = 0.0", "frame_hz"),
+            ("[pi_spi]\ncorrupt_bytes = [5, 500]", "corrupt_bytes"),
+            ("[pi_spi]\nodometry_at_s = 2.0", "odometry_at_s"),
+            (
+                "[[pi_spi.segments]]\nfrom_s = 0.5\nto_s = 0.5\nmodes = [\"mav\", \"mav\", \"mav\", \"mav\"]",
+                "segments",
+            ),
+            ("[[pi_spi.shutdown]]\nat_s = 0.5", "shutdown"),
+        ] {
+            let r = with(&format!("profile = \"pi-spi\"\n{extra}"));
+            assert!(
+                matches!(&r, Err(ScenarioError::Invalid(_, m)) if m.contains(field)),
+                "{extra}: {r:?}"
+            );
+        }
+        let r = with("profile = \"pi-spi\"\n[[faults]]\nkind = \"mcu_freeze\"\nat_s = 0.5");
+        assert!(
+            matches!(&r, Err(ScenarioError::Invalid(_, m)) if m.contains("pi-spi")),
+            "{r:?}"
+        );
         // The serial boards have no ESTOP button, encoder or clock model here: refused on load.
         let r =
             with("profile = \"teensy\"\n[[faults]]\nkind = \"estop\"\nat_s = 1.0\nrelease_s = 2.0");
@@ -885,6 +1151,10 @@ mod tests {
         assert_eq!(
             with("profile = \"cdc\"").unwrap().comm_loss_bound_ms(),
             200.0
+        );
+        assert_eq!(
+            with("profile = \"pi-spi\"").unwrap().comm_loss_bound_ms(),
+            50.0
         );
         assert_eq!(
             with("profile = \"cdc\"\n[cdc]\ntimeout_ms = 400")

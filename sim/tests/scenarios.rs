@@ -376,3 +376,101 @@ fn teensy_joints_reach_their_angles_within_a_step_and_brake_within_250_ms() {
     assert_eq!(s.rearms, 1);
     assert_eq!(s.final_mode, "BRAKE");
 }
+
+/// Seed 004: the Pi's buffers drive a 10 m path; the board's odometry, servos, shutdown bits and
+/// comm-loss BRAKE are checked against the plant and the rules.
+#[test]
+fn pi_spi_odometry_servos_shutdown_and_comm_loss() {
+    let sc = builtin()
+        .unwrap()
+        .into_iter()
+        .find(|s| s.name == "pi-spi-odometry-servos")
+        .unwrap();
+    let s = sim::run(&sc, &mut SimHost::new(), sim::RunOptions::default(), None)
+        .unwrap()
+        .summary;
+    // Every expectation but the odometry's first, so that a wrong odometry module shows as that
+    // one failure at the end.
+    let (odometry, others): (Vec<String>, Vec<String>) = s
+        .check(&sc)
+        .into_iter()
+        .partition(|f| f.starts_with("odometry error"));
+    assert!(others.is_empty(), "{others:#?}\n{s:#?}");
+    assert_eq!(s.profile, "pi-spi");
+    // Config::PI_SPI: BRAKE at the 49th tick after the last valid transfer, which came up to one
+    // period (10 ms) before the cut; shorted in that tick, strictly within the 50 ms bound.
+    assert_eq!(s.brake_after_last_frame_ticks, Some(49));
+    let ms = s.brake_after_last_frame_ms.unwrap();
+    assert!(ms > 48.0 && ms <= 49.0 + 1e-9, "{ms}");
+    assert_eq!(s.bridge_brake_after_last_frame_ms, Some(ms));
+    // The path is at least the 10 m of the issue.
+    assert!(
+        s.odometry_travel_m.unwrap() >= 10.0,
+        "{:?}",
+        s.odometry_travel_m
+    );
+    // Every shutdown transfer shorted every motor in its own step: the session start, the one
+    // while driving.
+    assert_eq!(s.shutdown_brake_ms, Some(0.0));
+    assert_eq!(s.shutdown_transfers, 2);
+    // Re-arms: the session start and after the shutdown at 24 s; nothing else left BRAKE.
+    assert_eq!(s.rearms, 2);
+    assert_eq!(s.rearm_violations, 0);
+    // Servo outputs checked after every transfer and tick, all as the rules give.
+    assert_eq!(s.servo_violations, Some(0));
+    assert!(s.servo_checks as f64 >= 1000.0 * sc.duration_s);
+    // Corruption happened, all of it refused.
+    assert!(s.corrupted_sent >= 20, "{}", s.corrupted_sent);
+    assert_eq!(s.corrupted_applied, 0);
+    assert_eq!(s.corrupted_rejected, s.corrupted_sent);
+    // Every TxBuffer the host received decoded (version 15).
+    let [ok, bad] = s.replies.unwrap();
+    assert_eq!(bad, 0);
+    assert!(ok as f64 >= 100.0 * 28.9, "{ok}");
+    assert_eq!(s.final_mode, "BRAKE");
+    // The board's odometry at rest after the path: within 1 % of the distance travelled (the
+    // scenario's expectation), and the heading after the 90° arc within a degree.
+    assert!(odometry.is_empty(), "{odometry:#?}");
+    assert!(s.odometry_heading_err_deg.unwrap() < 1.0, "{s:#?}");
+}
+
+/// Seed 004's link has no CRC: only the version byte and the parity of the updates word guard a
+/// transfer. Corruption anywhere in the RxBuffer (the default `corrupt_bytes`) therefore gets
+/// through: most of it into fields the board ignores, some into the command (a low bit of a MAV
+/// target within the ladder's acceleration check, a servo position within 600–2600), which the
+/// run counts as applied. (The built-in scenario corrupts only the guarded header.)
+#[test]
+fn pi_spi_corruption_of_unguarded_fields_is_applied_and_counted() {
+    let sc = Scenario::from_toml(
+        r#"
+name = "pi-spi-whole-buffer-corruption"
+duration_s = 5.0
+profile = "pi-spi"
+[[pi_spi.segments]]
+from_s = 0.1
+to_s = 5.0
+modes = ["mav", "mav", "mav", "mav"]
+targets = [2000, 2000, 2000, 2000]
+[[pi_spi.servos]]
+at_s = 0.1
+modes = ["enabled", "enabled", "enabled", "enabled"]
+positions = [1500, 1500, 1500, 1500]
+[[faults]]
+kind = "corruption"
+rate = 0.3
+from_s = 1.0
+to_s = 5.0
+"#,
+        "test",
+    )
+    .unwrap();
+    let s = sim::run(&sc, &mut SimHost::new(), sim::RunOptions::default(), None)
+        .unwrap()
+        .summary;
+    assert!(s.corrupted_sent > 80, "{}", s.corrupted_sent);
+    assert!(s.corrupted_applied > 0, "{s:#?}");
+    assert!(s.corrupted_rejected < s.corrupted_sent);
+    // The servo rules and the re-arm still hold whatever was taken.
+    assert_eq!(s.servo_violations, Some(0));
+    assert_eq!(s.rearm_violations, 0);
+}
