@@ -159,7 +159,9 @@ impl SimPiSpiBoard {
             counts,
             ..PiSpiTickInputs::default()
         };
-        let o = self.app.tick(&mut self.safety, self.estop.press_pending(), &inputs);
+        let o = self
+            .app
+            .tick(&mut self.safety, self.estop.press_pending(), &inputs);
         self.out = o.out;
         self.motors = o.motors;
         self.servos = o.servos;
