@@ -551,29 +551,26 @@ impl PiSpiApp {
         let (rx_bytes, _) = rx
             .split_first_chunk::<RX_LEN>()
             .unwrap_or((&[0; RX_LEN], &[]));
-        self.apply(
+        let o = self.apply(
             safety,
             wire::shutdown_raw(rx_bytes),
             wire::decode_rx(rx_bytes),
-            now_us,
-            digital,
-            tx,
-        )
+        );
+        self.write_feedback(now_us, digital, tx);
+        o
     }
 
-    /// What the task does with one transfer, given the raw shutdown bits and the decode result:
+    /// What the task decides from one transfer, given the raw shutdown bits and the decode result:
     /// the shutdown bits first, then a refusal becomes `Event::Rejected`, a decoded buffer goes
-    /// through the servo check and the ladder, then its one-shot updates; then the next TxBuffer.
-    /// The proofs split [`Self::on_transfer`] here: bytes → (bits, result) in the protocol crate,
-    /// (bits, result) → board and ladder here.
+    /// through the servo check and the ladder, then its one-shot updates. ([`Self::on_transfer`]
+    /// then writes the next TxBuffer, which reads the board's state and changes none of it.) The
+    /// proofs split `on_transfer` here: bytes → (bits, result) in the protocol crate, (bits,
+    /// result) → board and ladder here.
     pub fn apply(
         &mut self,
         safety: &mut Safety<MOTORS>,
         raw: Shutdown,
         decoded: Result<RxBuffer, RejectReason>,
-        now_us: u32,
-        digital: u16,
-        tx: &mut [u8; TRANSFER_LEN],
     ) -> TransferOutcome {
         // Step 0. A bit from any buffer can only stop things: it is set from the raw bytes, and
         // cleared only by a buffer that passed every check.
@@ -591,7 +588,6 @@ impl PiSpiApp {
         // (From the same bytes the decoded bit equals the raw one; held here whatever `decoded` is.)
         self.servo.shutdown |= raw.servos;
         let out = safety.output();
-        self.write_feedback(now_us, digital, tx);
         TransferOutcome {
             out,
             motors_off: out.drive == Drive::Brake,

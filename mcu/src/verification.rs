@@ -248,7 +248,7 @@ fn any_pi_rx(src: &mut impl Source) -> protocol::pi_spi::RxBuffer {
 /// byte 5 of any buffer.
 pub fn pi_spi_shutdown_bit_brakes_in_its_transfer(src: &mut impl Source) {
     use crate::pi_spi::{PiSpiApp, ServoOutputs, MOTORS, TUNING};
-    use protocol::pi_spi::{RxBuffer, Shutdown, TRANSFER_LEN};
+    use protocol::pi_spi::{RxBuffer, Shutdown};
     use statemachine::{check, Config, Drive, Mode};
     let ladder = statemachine::harness::arbitrary::ladder::<MOTORS>(src, Config::PI_SPI);
     let mut safety = crate::Safety::from_ladder(ladder);
@@ -263,8 +263,7 @@ pub fn pi_spi_shutdown_bit_brakes_in_its_transfer(src: &mut impl Source) {
     } else {
         Err(statemachine::harness::arbitrary::reason(src))
     };
-    let mut tx = [0u8; TRANSFER_LEN];
-    let o = app.apply(&mut safety, raw, decoded, src.u32(), src.u16(), &mut tx);
+    let o = app.apply(&mut safety, raw, decoded);
     check!(
         o.out.mode == Mode::Brake && o.out.drive == Drive::Brake,
         "the motor shutdown bit latches BRAKE in its own transfer"
@@ -291,7 +290,7 @@ pub fn pi_spi_shutdown_bit_brakes_in_its_transfer(src: &mut impl Source) {
 /// what it was unless its shutdown bit stops the motors.
 pub fn pi_spi_refusal_changes_nothing(src: &mut impl Source) {
     use crate::pi_spi::{PiSpiApp, MOTORS, TUNING};
-    use protocol::pi_spi::{Shutdown, TRANSFER_LEN};
+    use protocol::pi_spi::Shutdown;
     use statemachine::{check, Config, Drive, Mode, RejectReason};
     let ladder = statemachine::harness::arbitrary::ladder::<MOTORS>(src, Config::PI_SPI);
     let mut safety = crate::Safety::from_ladder(ladder);
@@ -306,8 +305,7 @@ pub fn pi_spi_refusal_changes_nothing(src: &mut impl Source) {
     let gains = app.loops().map(|l| l.gains());
     let servo = *app.servo();
     let updates_before = *app.updates();
-    let mut tx = [0u8; TRANSFER_LEN];
-    let o = app.apply(&mut safety, raw, Err(reason), src.u32(), src.u16(), &mut tx);
+    let o = app.apply(&mut safety, raw, Err(reason));
     check!(!o.accepted, "a refused buffer is not accepted");
     check!(
         safety.ladder().counters().valid_frames == frames,
