@@ -635,6 +635,63 @@ pub fn odometry_update_finite(src: &mut impl Source) {
     cover!(src, half_turn, "more than half a turn in one period");
 }
 
+/// Kani models of the one-shot updates' appliers, for the shutdown harness: each is proven on its
+/// own (INV-23 `verify_pi_spi_gain_updates_stay_bounded`, `verify_odometry_configure_guarded`,
+/// `imu::verify_orientation_check_is_the_definition`), none takes the ladder, and none of their
+/// state is read by the property; the models return any result and so over-approximate them.
+/// (They also keep `libm`'s x86 inline assembly, which Kani does not model, out of that harness.)
+// Referenced only by the `kani::stub` attributes, which rustc does not count as uses.
+#[cfg(kani)]
+#[allow(dead_code)]
+mod update_models {
+    use crate::imu::{ImuFusion, OrientationError};
+    use crate::odometry::{KinematicsError, Odometry};
+    use crate::pi_spi::{GainBounds, GainError, MOTORS};
+    use control::{AntiWindup, PidGains, Q};
+    use protocol::pi_spi::assumed::{KinematicsConfig, MotorPidSettings};
+
+    pub fn any_gains(
+        _s: &MotorPidSettings,
+        b: &GainBounds,
+    ) -> Result<[PidGains; MOTORS], GainError> {
+        if kani::any() {
+            return Err(GainError::TooLarge);
+        }
+        let g = || PidGains {
+            kp: Q::from_bits(kani::any()),
+            ki_dt: Q::from_bits(kani::any()),
+            kd_dt: Q::from_bits(kani::any()),
+            out_limit: b.out_limit,
+            i_limit: b.i_limit,
+            anti_windup: AntiWindup::Conditional,
+        };
+        Ok([g(), g(), g(), g()])
+    }
+
+    pub fn any_orientation(
+        _imu: &mut ImuFusion,
+        _gyro: [i8; 9],
+        _compass: [i8; 9],
+    ) -> Result<(), OrientationError> {
+        if kani::any() {
+            Ok(())
+        } else {
+            Err(OrientationError::GyroEntry)
+        }
+    }
+
+    pub fn any_configure(
+        _odo: &mut Odometry,
+        _k: &KinematicsConfig,
+    ) -> Result<(), KinematicsError> {
+        if kani::any() {
+            Ok(())
+        } else {
+            Err(KinematicsError::NotFinite)
+        }
+    }
+}
+
 #[cfg(kani)]
 mod proofs {
     use statemachine::harness::KaniSource;
@@ -672,13 +729,20 @@ mod proofs {
     }
 
     /// Command validation is INV-5's proven contract here (`statemachine::kani_models`), as in
-    /// the ladder's own harnesses: no symbolic float conversion in this one.
+    /// the ladder's own harnesses, and the one-shot updates' appliers their models
+    /// (`update_models`): no symbolic float arithmetic in this one.
     #[kani::proof]
     #[kani::unwind(17)]
     #[kani::stub(
         statemachine::validate::validate_into,
         statemachine::kani_models::any_validation
     )]
+    #[kani::stub(crate::pi_spi::gains_from_wire, super::update_models::any_gains)]
+    #[kani::stub(
+        crate::imu::ImuFusion::set_orientation,
+        super::update_models::any_orientation
+    )]
+    #[kani::stub(crate::odometry::Odometry::configure, super::update_models::any_configure)]
     fn verify_pi_spi_shutdown_bit_brakes_in_its_transfer() {
         super::pi_spi_shutdown_bit_brakes_in_its_transfer(&mut KaniSource);
     }
