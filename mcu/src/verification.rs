@@ -742,7 +742,10 @@ mod proofs {
         crate::imu::ImuFusion::set_orientation,
         super::update_models::any_orientation
     )]
-    #[kani::stub(crate::odometry::Odometry::configure, super::update_models::any_configure)]
+    #[kani::stub(
+        crate::odometry::Odometry::configure,
+        super::update_models::any_configure
+    )]
     fn verify_pi_spi_shutdown_bit_brakes_in_its_transfer() {
         super::pi_spi_shutdown_bit_brakes_in_its_transfer(&mut KaniSource);
     }
