@@ -8,7 +8,8 @@ deepest stack pointer seen below the entry SP (the handler's own stack use, excl
 hardware-stacked exception frame).
 
 Units are the board application's task bodies (`mcu::…`, kept out of line for this count) and the
-RTIC handlers, named by their interrupt symbols. Per call it also records:
+RTIC handlers, named by their interrupt symbols; a profile's list (AMR_SPI, CDC, TEENSY, PI_SPI)
+is chosen by BUDGET_PROFILE. Per call it also records:
 - `own`: instructions inside the unit's symbol itself (the rest ran in functions it called), so
   report.py can replace a handler's own code by the board build's, which differs from the `qemu`
   build's;
@@ -52,6 +53,10 @@ ESTOP_BIT = 1 << 4
 NVIC_ISPR = 0xE000_E200
 IRQ_EXTI4 = 10
 IRQ_USART1 = 37
+IRQ_UART4 = 52
+# SCB interrupt control and state register and its SysTick pending-clear bit.
+SCB_ICSR = 0xE000_ED04
+PENDSTCLR = 1 << 25
 # ADC1 status register and its end-of-conversion bit: QEMU's ADC never sets it (the `cdc` image's
 # battery reading would poll until its timeout); it reads set at the first poll.
 ADC1_SR = 0x4001_2000
@@ -133,14 +138,50 @@ TEENSY = [
     TRACE_UNIT,
     ESTOP_PRESS,
 ]
+# The seed 004 image (`pi-spi`): like amr-spi, its transfers come from a host file
+# (pi_spi_transfers.bin, written by `firmware/qemu/pi_spi.py make-budget`: a shutdown transfer, then
+# one every 10 ticks, the seed's 100 Hz, with the four motor modes mixed and every costly update
+# flag set), one record per tick; SysTick pends the tick (TIM7), the tick pends the link task
+# (DMA1_STREAM3) and, every 10th tick, imu_read (UART4). The ladder re-arms at tick 20 and holds
+# REDUCED for 1000 clean ticks: counting starts after that.
+PI_TRANSFER = "mcu::pi_spi::PiSpiApp::on_transfer"
+PI_TICK = "mcu::pi_spi::PiSpiApp::tick"
+# Consecutive calls sampled where one in ten differs: a transfer arrives in one tick of ten (the
+# link task runs every tick and finds no record in the other nine), the odometry runs in one tick
+# of ten, and its full integration only in one of twenty (the transfers reconfigure the kinematics
+# every other time, and the odometry update right after a configuration only takes the counts).
+PI_CONSECUTIVE = 20
+PI_SPI = [
+    ("transfer: on_transfer (shutdown bits, checks, decode, ladder, one-shot updates, next TxBuffer)",
+     PI_TRANSFER, "fn", {"settle": SETTLE + 100}),
+    ("spi_dma_done handler (DMA1_STREAM3), 20 consecutive ticks (2 with a transfer)", "DMA1_STREAM3", "isr",
+     {"samples": PI_CONSECUTIVE}),
+    ("tick: run (ladder tick, four motor loops, odometry every 10th tick), 20 consecutive ticks",
+     PI_TICK, "fn", {"samples": PI_CONSECUTIVE}),
+    ("watchdog_tick handler (TIM7), 20 consecutive ticks", "TIM7", "isr", {"samples": PI_CONSECUTIVE}),
+    # QEMU models no I2C: the `qemu` build's sensor is absent, so the body runs the fusion's
+    # `sensor_lost`, not `ImuFusion::update`; the ADC scan is the emulator's (every input 0).
+    # Under QEMU the priority-1 task never gets to run by itself: the emulated core is slower than
+    # the host's clock, which drives SysTick, so the emulator's tick source (SysTick, priority 1
+    # too, and taken first at equal priority) is pending again whenever the tick ends. So each
+    # sample pends UART4 as the tick does, and clears SysTick's pending bit (one emulated tick is
+    # dropped) so the task runs before the next tick.
+    ("imu_read handler (UART4), sensor absent (ImuFusion::sensor_lost)", "UART4", "isr",
+     {"pend": IRQ_UART4, "store": (SCB_ICSR, PENDSTCLR)}),
+    TRACE_UNIT,
+    ESTOP_PRESS,
+]
 PROFILE = os.environ.get("BUDGET_PROFILE", "amr-spi")
-UNITS = {"amr-spi": AMR_SPI, "cdc": CDC, "teensy": TEENSY}[PROFILE]
+UNITS = {"amr-spi": AMR_SPI, "cdc": CDC, "teensy": TEENSY, "pi-spi": PI_SPI}[PROFILE]
+# The tick's handler: TIM2 on the seed 000–003 boards, TIM7 on seed 004's.
+TICK_HANDLER = {"pi-spi": "TIM7"}.get(PROFILE, "TIM2")
 KEEPALIVE = serial_frames.KEEPALIVE.get(PROFILE)
 LINK_BODY = {"cdc": CDC_BYTE, "teensy": TEENSY_BYTE}.get(PROFILE)
 # Calls run through uncounted: the emulator's trace printing (the board prints nothing per tick).
 SKIP = re.compile(r"core::fmt::|cortex_m_semihosting::|fixed::display::|as core::fmt::")
-# Code the board does not run: the emulator's link and hooks, semihosting.
-EMULATOR = ("firmware::board::emu", "cortex_m_semihosting")
+# Code the board does not run: the emulator's link and hooks, semihosting (`pi-spi`'s hooks live
+# in its board module: on the board `after_tick` is empty).
+EMULATOR = ("firmware::board::emu", "cortex_m_semihosting", "firmware::board::pi_spi::hooks")
 # The trace's entry point: a call that records a mode change, latch or re-arm runs it.
 TRACE_PUSH = "mcu::trace::Trace::push"
 LOAD = re.compile(r"^ldr(?:\.w)?\s+(r\d+|ip|lr),\s*\[(r\d+|ip|lr|sp)(?:,\s*#(-?\d+))?\]")
@@ -184,16 +225,21 @@ def chain_at(pc, cache={}):
 
 
 def pend(irq):
-    """Sets an interrupt pending. gdb cannot: QEMU's debug writes reach RAM and ROM only, not the
-    NVIC. So the core itself executes one `str r1, [r0]` placed in RAM, with the registers it
-    touches restored after it (single steps run with interrupts masked: the interrupt is taken
-    at the next `continue`)."""
+    """Sets an interrupt pending (see `core_store`)."""
+    core_store(NVIC_ISPR + 4 * (irq // 32), 1 << (irq % 32))
+
+
+def core_store(address, value):
+    """Writes a system register (the NVIC's, the SCB's). gdb cannot: QEMU's debug writes reach RAM
+    and ROM only. So the core itself executes one `str r1, [r0]` placed in RAM, with the registers
+    it touches restored after it (single steps run with interrupts masked: an interrupt set
+    pending is taken at the next `continue`)."""
     inf = gdb.selected_inferior()
     saved = {r: reg(r) for r in ("pc", "r0", "r1")}
     old = bytes(inf.read_memory(STUB, 2))
     inf.write_memory(STUB, b"\x01\x60")  # str r1, [r0]
-    set_reg("r0", NVIC_ISPR + 4 * (irq // 32))
-    set_reg("r1", 1 << (irq % 32))
+    set_reg("r0", address)
+    set_reg("r1", value)
     set_reg("pc", STUB)
     gdb.execute("stepi", to_string=True)
     for r, v in saved.items():
@@ -335,9 +381,10 @@ def deliver(syms, link, frame):
 
 
 def run_ticks(syms, n, link=None):
-    """Lets the firmware run uncounted until `n` more ticks (TIM2 handler entries) have begun; with
-    `link`, the keepalive frame goes out every 20 ticks, as the host would send it."""
-    tim2 = gdb.Breakpoint("*" + hex(syms["TIM2"][0]), internal=True)
+    """Lets the firmware run uncounted until `n` more ticks (tick handler entries: TIM2, `pi-spi`'s
+    TIM7) have begun; with `link`, the keepalive frame goes out every 20 ticks, as the host would
+    send it."""
+    tim2 = gdb.Breakpoint("*" + hex(syms[TICK_HANDLER][0]), internal=True)
     tim2.enabled = False
     while n > 0:
         chunk = min(n, KEEPALIVE[1]) if link else n
@@ -399,6 +446,8 @@ def main():
             for i in range(samples):
                 if "pend" in opts:
                     pend(opts["pend"])
+                if "store" in opts:
+                    core_store(*opts["store"])
                 if "after_reply" in opts:
                     bp.enabled = False
                     find_phase(syms, link, *opts["after_reply"])

@@ -15,7 +15,7 @@ import subprocess
 import sys
 
 # Every image's (those an image lacks are left out of its facts).
-HANDLERS = ("ADC", "TIM5", "TIM2", "DMA1_STREAM3", "EXTI15_10", "EXTI4", "USART1", "TIM3")
+HANDLERS = ("ADC", "TIM5", "TIM2", "DMA1_STREAM3", "EXTI15_10", "EXTI4", "USART1", "TIM3", "TIM7", "UART4")
 HEADER = re.compile(r"^([0-9a-f]+) <(.+)>:$")
 INSN = re.compile(r"^\s*([0-9a-f]+):\s+(\S+)\s*(.*)$")
 TARGET = re.compile(r"^([0-9a-f]+) <([^>+]+)(\+0x[0-9a-f]+)?>")

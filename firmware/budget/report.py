@@ -6,7 +6,7 @@ Usage: report.py DIR PROFILE... > BUDGET.md
 DIR/<profile>/ holds what run.sh gathered for that image: size.txt (arm-none-eabi-size -A),
 counts.json (count.py), stack.md (stack.py), handlers.json (handlers.py) and qemu.log (QEMU's output,
 the serial images' trace). `amr-spi` gets the sections it always had; `cdc` and `teensy` a section
-each (report.py's SERIAL says what each runs and sends).
+each (report.py's SERIAL says what each runs and sends); `pi-spi` its own (PI_TASKS).
 """
 import json
 import os
@@ -626,6 +626,179 @@ def serial(out, profile, img):
     return summary
 
 
+# The seed 004 image (`pi-spi`): the units count.py's PI_SPI list counts, by symbol.
+PI_TRANSFER = "mcu::pi_spi::PiSpiApp::on_transfer"
+PI_TICK = "mcu::pi_spi::PiSpiApp::tick"
+PI_ODOMETRY = "mcu::odometry::Odometry::update"
+# Its RTIC tasks: task, interrupt, priority, rate in Hz (None: per event), trigger. The rates are the
+# seed's: a transfer every 10 ms (the Pi's 100 Hz), the tick at 1 kHz, the IMU every 10th tick.
+PI_TASKS = [
+    ("estop_input", "EXTI4", 5, None, "ESTOP input edge (PD4)"),
+    ("spi_dma_done", "DMA1_STREAM3", 2, 100, "SPI2 RX DMA transfer complete, one per 179-byte transfer"),
+    ("spi_nss_rise", "EXTI15_10", 2, 100, "NSS rising edge (PB12), one per transfer"),
+    ("watchdog_tick", "TIM7", 2, 1_000, "TIM7 update"),
+    ("imu_read", "UART4", 1, 100, "pended by every 10th tick"),
+]
+PI_BODIES = [
+    "mcu::pi_spi::PiSpiApp::on_transfer", "mcu::pi_spi::PiSpiApp::tick", "mcu::pi_spi::PiSpiApp::imu_sample",
+    "mcu::odometry::Odometry::update", "mcu::odometry::Odometry::configure",
+    "mcu::imu::ImuFusion::set_orientation", "mcu::imu::ImuFusion::sensor_lost", "mcu::pi_spi::gains_from_wire",
+    "mcu::serial::tick", "mcu::estop::EstopInput::poll", "mcu::estop::EstopInput::edge_then",
+]
+# `board::pi_spi::Analog::scan`: ADC1 at PCLK2 / 4 = 21 MHz, six inputs at 144 + 12 ADC cycles and
+# the battery at 480 + 12, polled conversion by conversion.
+PI_ADC_HZ = 21e6
+PI_ADC_CYCLES = 6 * (144 + 12) + (480 + 12)
+
+
+def pi_spi(out, img):
+    """The `pi-spi` image's section; returns its figures for the overview."""
+    counts, board, qemu = img.counts, img.board, img.qemu
+    by_sym = {}
+    for name, r in counts.items():
+        by_sym.setdefault(r["symbol"], (name, r))
+    mx = {sym: max(r["instructions"]) for sym, (_, r) in by_sym.items()}
+    out.append("## Image `pi-spi` (seed 004: 179-byte SPI transfers from a Raspberry Pi)\n")
+    memory(out, img, "###")
+    units(out, img, "###")
+    out.append("As for `amr-spi`, the transfers come from a host file through semihosting, one record per")
+    out.append("tick (`pi_spi_transfers.bin`, written by `firmware/qemu/pi_spi.py make-budget` with Python's")
+    out.append("`struct` from the seed's declarations): a shutdown transfer, then one every 10 ticks (the")
+    out.append("Pi's 100 Hz), each with the four motors in four different modes (PWM, MAV, MTP,")
+    out.append("PASSIV_BRAKE, rotated from one transfer to the next), the four servos enabled, and the")
+    out.append("costliest one-shot updates: both gain sets (MOTOR_PID_SPEED and MOTOR_PID_POS, within")
+    out.append("`SPEED_BOUNDS` and `POSITION_BOUNDS`), IMU_ORIENTATION (the gyro's alternating between the")
+    out.append("identity and a quarter turn about z, so each one turns the fusion's quaternion; the")
+    out.append("compass's the identity) and, in every other transfer, KINEMATICS (a mecanum")
+    out.append("configuration: wheel radius 0.0325 m, 0.18 m half track + half wheelbase, 2π/1440 rad per")
+    out.append("count). Counting starts after the REDUCED window of 1000 ticks that follows the re-arm.")
+    out.append("SysTick stands in for TIM7 and the tick pends `spi_dma_done` in every tick (the emulated")
+    out.append("link reads one record per call): the handler's calls in a tick without a transfer are its")
+    out.append("minimum above; the board raises it only for a transfer. The tick and its handler are")
+    out.append("sampled over 20 consecutive ticks: the odometry runs in every 10th, and integrates in")
+    out.append("one of 20 (the update right after a kinematics configuration only takes the counts as its")
+    out.append("baseline). QEMU models no I2C: the `qemu` build's IMU is absent, so `imu_read` runs")
+    out.append("`ImuFusion::sensor_lost`; the fusion itself (`ImuFusion::update`) is **not measured** (see")
+    out.append("the load table). Under QEMU the priority-1 `imu_read` does not get to run by itself (the")
+    out.append("emulated core is slower than the host clock that drives SysTick, the emulator's tick")
+    out.append("source, at priority 1 too, so SysTick is pending again whenever a tick ends): count.py pends")
+    out.append("UART4 as the tick does and clears SysTick's pending bit before each sample.")
+    out.append("")
+
+    changes, last = trace_modes(img.log)
+    if last:
+        out.append(f"The firmware's own trace (QEMU's output) over the run: rung changes "
+                   f"{' → '.join(changes)} (`Mode@tick`); at the end {last['valid']} valid transfers, "
+                   f"{last['rejected']} refused.")
+        out.append("")
+
+    tr = by_sym.get(PI_TRANSFER)
+    dma = by_sym.get("DMA1_STREAM3")
+    in_dma = dma[1].get("inclusive", {}).get(PI_TRANSFER, 0) if dma else 0
+    transfer = max(mx.get(PI_TRANSFER, 0), in_dma) or None
+    tick = by_sym.get(PI_TICK)
+    tim7 = by_sym.get("TIM7")
+    summary = {"frame": transfer, "frame_what": "SPI transfer (`on_transfer`)", "tick": None, "load": None}
+    if transfer:
+        out.append(f"Per transfer: **{transfer} instructions** in `PiSpiApp::on_transfer` (the most over the "
+                   f"sampled transfers: the unit's {mx.get(PI_TRANSFER, 0)} and {in_dma} inside the "
+                   f"`spi_dma_done` handler), {mx.get('DMA1_STREAM3', 0)} for the whole handler (the "
+                   f"`qemu` build, its emulated link included; the board's in the load table).")
+    if tr:
+        incl = tr[1].get("inclusive", {})
+        total = max(tr[1]["instructions"])
+        apply_ = incl.get("mcu::pi_spi::PiSpiApp::apply", 0)
+        take = incl.get("mcu::pi_spi::PiSpiApp::take", 0)
+        upd = incl.get("mcu::pi_spi::PiSpiApp::apply_updates", 0)
+        fb = incl.get("mcu::pi_spi::PiSpiApp::write_feedback", 0)
+        gains = incl.get("mcu::pi_spi::gains_from_wire", 0)
+        orient = incl.get("mcu::imu::ImuFusion::set_orientation", 0)
+        kin = incl.get("mcu::odometry::Odometry::configure", 0)
+        out.append(f"The worst sampled transfer by stage: {total} = {total - apply_} the version, parity and "
+                   f"decode of the 179 bytes (with `on_transfer`'s own entry and exit) + {take - upd} the "
+                   f"servo check and the ladder's two events + **{upd} the one-shot updates** (both gain "
+                   f"sets {gains}, the orientation {orient}, the kinematics {kin}) + {fb} the next TxBuffer "
+                   f"+ {apply_ - take - fb} the shutdown bits and the outcome. A transfer without update "
+                   f"flags costs about {total - upd} (not sampled separately).")
+    if tick:
+        t = tick[1]
+        odo = t.get("inclusive", {}).get(PI_ODOMETRY, 0)
+        summary["tick"] = max(t["instructions"])
+        out.append(f"Per tick: {min(t['instructions'])}–**{max(t['instructions'])} instructions** in "
+                   f"`PiSpiApp::tick` over 20 consecutive ticks; the worst one "
+                   + (f"ran the odometry's integration ({odo} of its instructions in `Odometry::update`)"
+                      if odo else "did not run the odometry (CHECK: the sampled ticks missed it)")
+                   + (f"; {min(tim7[1]['instructions'])}–{max(tim7[1]['instructions'])} for the whole "
+                      f"`watchdog_tick` handler" if tim7 else "") + ".")
+    out.append("")
+
+    bodies(out, counts, PI_BODIES)
+    for sym in (PI_TRANSFER, PI_TICK):
+        if sym in by_sym:
+            name, r = by_sym[sym]
+            out.append(f"{name}, its worst sampled call:\n")
+            profile_table(out, r["by_function"])
+
+    load = Load(out, "###")
+    for task, sym, prio, rate, trigger in PI_TASKS:
+        b, q = board.get(sym), qemu.get(sym)
+        if sym in by_sym and b and q:
+            n, how = board_estimate(by_sym[sym][1], b, q)
+            if sym == "DMA1_STREAM3":
+                how += " (a call with a transfer)"
+            if sym == "TIM7":
+                how += ("; the worst of 20 consecutive ticks, the odometry's included, taken for every "
+                        "tick (it runs in one of ten)")
+            if sym == "UART4":
+                how += ("; the sensor absent (`sensor_lost`) and the emulator's ADC, which reads 0 at "
+                        "once: the board's waits and the fusion follow")
+        elif b and b["loop_free"]:
+            n = b["instructions"]
+            calls = ", ".join(f"`{c}`" for c in b["calls"])
+            how = (f"not run under QEMU (no chip select); the board handler's {n} instructions, loop-free: "
+                   f"a bound for its own code" + (f", without its calls ({calls})" if calls else ""))
+        else:
+            n, how = None, None
+        load.row(f"{task} (`{sym}`)", prio, trigger, rate, n, how)
+        if sym == "UART4":
+            adc = PI_ADC_CYCLES / PI_ADC_HZ * F_CPU
+            load.row("imu_read: ADC scan (`UART4`)", prio, "each run", rate, None,
+                     f"the polled waits for ADC1 (`Analog::scan`): {PI_ADC_CYCLES} ADC cycles at "
+                     f"{PI_ADC_HZ / 1e6:.0f} MHz (QEMU's ADC has no scan: the `qemu` build reads 0)",
+                     cycles=adc)
+            i2c = I2C_BITS / I2C_HZ * F_CPU
+            load.row("imu_read: MPU6050 read (`UART4`)", prio, "each run", rate, None,
+                     f"**not measured** (QEMU has no I2C model; the `qemu` build's sensor is absent): "
+                     f"{I2C_BITS} bit times at {I2C_HZ / 1e3:.0f} kHz (`board::cdc::Imu`, as on the seed 001 "
+                     f"board), the blocking HAL polling throughout", cycles=i2c)
+            load.row("imu_read: fusion `ImuFusion::update` (`UART4`)", prio, "each run", rate, None, None)
+    total, sporadic = load.end()
+    summary["load"] = 100 * total / F_CPU
+    notes = []
+    notes.append("The IMU fusion (`mcu::imu::ImuFusion::update`: the orientation, bias window and filter in "
+                 "`f32`) is **not measured**: QEMU has no I2C, so no reading reaches it under the emulator, "
+                 "and its cost is in no figure here; the total leaves it out. It runs in `imu_read` at "
+                 "priority 1, like the ADC and I2C waits above, which block only that task: the tick, the "
+                 "transfers and the ESTOP input preempt it.")
+    if sporadic:
+        notes.append(f"{', '.join(f'`{t}`' for t in sporadic)} runs once per input edge, not at a rate, "
+                     "and is left out of the total.")
+    notes.append("The wheels stand still under QEMU (the `qemu` build's encoders read 0), so the odometry "
+                 "integrates zero motion: `sinf`/`cosf` of a zero heading and the arc factors of a zero turn "
+                 "take their shortest paths. With the wheels turning they take longer; that case (one tick in "
+                 "ten) is not measured.")
+    notes.append("The `qemu` build's encoders and ADC read 0 and its µs clock counts whole ticks (QEMU models "
+                 "neither TIM2–TIM6 as the board uses them nor the ADC scan); the board handlers' own code "
+                 "is put in place of the emulator's as for `amr-spi`. Transfers the ladder refuses, or that "
+                 "change the rung, cost a trace record more (the trace unit above).")
+    for n in notes:
+        out.append(n)
+        out.append("")
+    out.append(img.stack)
+    out.append("")
+    return summary
+
+
 def overview(out, figures):
     """One row per image."""
     out.append("## Every image\n")
@@ -639,8 +812,10 @@ def overview(out, figures):
         out.append(f"| `{profile}` | {img.flash} | {img.ram} | {frame} | {tick} | {load} |")
     out.append("")
     out.append("The `amr-spi` image (seed 000, SPI) comes first, in the sections below as before; the")
-    out.append("serial images follow, each in its own section. Per received frame: `amr-spi`'s receive")
-    out.append("unit; the serial images' link body summed over one frame's bytes.\n")
+    out.append("serial images follow, each in its own section, then `pi-spi` (seed 004, SPI). Per received")
+    out.append("frame: `amr-spi`'s receive unit; the serial images' link body summed over one frame's bytes;")
+    out.append("`pi-spi`'s `on_transfer` per 179-byte transfer. Tick body: `pi-spi`'s is its worst of 20")
+    out.append("consecutive ticks, one running the odometry.\n")
 
 
 def main(d, *profiles):
@@ -653,7 +828,13 @@ def main(d, *profiles):
     sections, figures = [], []
     for p, img in images:
         part = []
-        figures.append((p, img, amr_spi(part, img) if p == "amr-spi" else serial(part, p, img)))
+        if p == "amr-spi":
+            f = amr_spi(part, img)
+        elif p == "pi-spi":
+            f = pi_spi(part, img)
+        else:
+            f = serial(part, p, img)
+        figures.append((p, img, f))
         sections += part
     overview(out, figures)
     print("\n".join(out + sections))

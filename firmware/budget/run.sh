@@ -1,18 +1,19 @@
 #!/usr/bin/env bash
-# Regenerates firmware/BUDGET.md for every image (amr-spi, cdc, teensy): flash/RAM of the board build,
+# Regenerates firmware/BUDGET.md for every image (amr-spi, cdc, teensy, pi-spi): flash/RAM of the board build,
 # executed instructions of the board application's task bodies (`mcu::…`) and of each RTIC handler
 # (Cortex-M4 code of the `qemu` build under QEMU, counted by gdb single-stepping: count.py), measured
 # stack use per unit, the board build's handler code (handlers.py), the worst-case stack per task from
 # the call graph (stack.sh), and the resulting CPU load at 168 MHz. A report, not a test: it takes
 # several minutes (about a quarter of an hour on a loaded 2-core machine).
-# amr-spi reads its link frames from a host file (firmware/qemu/make_frames.py); the serial images
-# get their bytes on USART1, which QEMU serves on a local TCP port that count.py writes to.
+# amr-spi reads its link frames from a host file (firmware/qemu/make_frames.py), pi-spi its transfers
+# (firmware/qemu/pi_spi.py make-budget); the serial images get their bytes on USART1, which QEMU
+# serves on a local TCP port that count.py writes to.
 # Needs qemu-system-arm, gdb-multiarch, binutils-arm-none-eabi (Debian packages; iproute2's `ss` if present) and python3.
 set -euo pipefail
 cd "$(dirname "$0")/../.."
 cargo fw
 cargo build -p firmware --release --target thumbv7em-none-eabihf --features qemu --target-dir target/qemu
-profiles=(amr-spi cdc teensy)
+profiles=(amr-spi cdc teensy pi-spi)
 work="$(mktemp -d)"
 qpid=""
 stop_qemu() {
@@ -25,7 +26,9 @@ cleanup() {
   rm -rf "$work"
 }
 trap cleanup EXIT
+# Semihosting paths are relative to QEMU's working directory ($work): each image opens its own file.
 python3 firmware/qemu/make_frames.py "$work/frames.bin"
+python3 firmware/qemu/pi_spi.py make-budget "$work/pi_spi_transfers.bin"
 for profile in "${profiles[@]}"; do
   out="$work/$profile"
   mkdir -p "$out"
@@ -34,7 +37,7 @@ for profile in "${profiles[@]}"; do
   port=$((20000 + RANDOM % 20000))
   link=(-serial none)
   serial_env=()
-  if [ "$profile" != amr-spi ]; then
+  if [ "$profile" != amr-spi ] && [ "$profile" != pi-spi ]; then
     link=(-chardev "socket,id=link,host=127.0.0.1,port=$((port + 1)),server=on,wait=off" -serial chardev:link)
     serial_env=(BUDGET_SERIAL_PORT=$((port + 1)))
   fi

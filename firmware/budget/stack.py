@@ -2,7 +2,7 @@
 """Worst-case stack per task of the firmware ELF, from the compiler's frame sizes and the call graph.
 
 Usage: stack.py ELF [PROFILE] > stack.md   (ELF built with `-Z emit-stack-sizes`, see stack.sh; PROFILE
-names the image's tasks: amr-spi (the default), cdc or teensy)
+names the image's tasks: amr-spi (the default), cdc, teensy or pi-spi)
 
 - Frame sizes: the `.stack_sizes` section (LLVM writes, per function, its address and the bytes its
   prologue reserves). Functions without an entry (assembly, and `compiler_builtins`, which is not
@@ -45,6 +45,14 @@ ROOTS_BY_PROFILE = {
         ("TIM2", "watchdog_tick", 2),
         ("USART1", "link_usart", 2),
         ("TIM5", "step_gen", 3),
+        ("EXTI4", "estop_input", 5),
+    ] + FAULTS,
+    # Seed 004. The emulator-only emu_tick (SysTick) is not in the board build.
+    "pi-spi": THREAD + [
+        ("UART4", "imu_read", 1),
+        ("DMA1_STREAM3", "spi_dma_done", 2),
+        ("EXTI15_10", "spi_nss_rise", 2),
+        ("TIM7", "watchdog_tick", 2),
         ("EXTI4", "estop_input", 5),
     ] + FAULTS,
 }

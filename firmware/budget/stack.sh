@@ -2,7 +2,7 @@
 # Worst-case stack per RTIC task: builds the board firmware with `-Z emit-stack-sizes` (LLVM writes
 # every function's frame size into a `.stack_sizes` section) and walks the call graph of its
 # disassembly (firmware/budget/stack.py). Prints a Markdown section; run.sh puts it in BUDGET.md.
-# Usage: stack.sh [PROFILE]   (the image: amr-spi, the default, cdc or teensy)
+# Usage: stack.sh [PROFILE]   (the image: amr-spi, the default, cdc, teensy or pi-spi)
 #
 # The flag is unstable. RUSTC_BOOTSTRAP=1 lets the pinned stable compiler accept it, so the analysed
 # code is what that compiler generates for `cargo fw` (same version, same profile; the flag only adds

@@ -4,11 +4,14 @@
   pi_spi.py make TRANSFERS       writes the host's transfers: one record per watchdog tick,
                                  tag byte (1 = a transfer in this tick, 0 = none) + 179 bytes
   pi_spi.py check TRACE FEEDBACK checks the firmware's own trace and the TxBuffers it queued
+  pi_spi.py make-budget TRANSFERS  writes the run firmware/budget/run.sh counts instructions on
+                                 (worst-case-ish transfers: mixed modes, every costly update flag)
 
 The buffers are packed here with Python's `struct` from the seed's C declarations (little-endian,
 packed), independently of the Rust codec, so the test also checks that the firmware reads what a
 Pi written from the seed sends.
 """
+import math
 import re
 import struct
 import sys
@@ -44,21 +47,25 @@ SCRIPT = [
 END_TICK = 1420
 
 
-def rx_buffer(modes, targets, updates=0, shutdown=0, version=VERSION, parity_ok=True):
+def rx_buffer(modes, targets, updates=0, shutdown=0, version=VERSION, parity_ok=True,
+              goals=(0, 0, 0, 0), servo_modes=(0, 0, 0, 0), servo_pos=(0, 0, 0, 0),
+              pid=((0.0,) * 4, (0.0,) * 4, (0.0,) * 4), gyro=(0,) * 9, compass=(0,) * 9,
+              inverse=((0.0,) * 4,) * 3, ticks_to_rad=(0.0,) * 4):
     """An RxBuffer as the seed declares it: version, updates (bit 7 parity), systemShutdown,
-    motorControlMode (3 bits per motor), motorTarget[4], motorGoalPosition[4], servoMode,
-    servoPos[4], MotorPidSettings (f32 kp[4], ki[4], kd[4]), two i8[9] orientations,
+    motorControlMode (3 bits per motor), motorTarget[4], motorGoalPosition[4], servoMode (2 bits
+    per servo), servoPos[4], MotorPidSettings (f32 kp[4], ki[4], kd[4]), two i8[9] orientations,
     KinematicsConfig (f32 inverse[3][4], ticks_to_rad[4])."""
     if bin(updates & 0x7F).count("1") % 2 == 0:
         updates |= 0x80
     if not parity_ok:
         updates ^= 0x80
     mode_word = sum(m << (3 * n) for n, m in enumerate(modes))
-    b = struct.pack("<BIBH4i4iB4H", version, updates, shutdown, mode_word, *targets, 0, 0, 0, 0,
-                    0, 0, 0, 0, 0)
-    b += struct.pack("<12f", *([0.0] * 12))
-    b += bytes(18)
-    b += struct.pack("<16f", *([0.0] * 16))
+    servo_word = sum(m << (2 * n) for n, m in enumerate(servo_modes))
+    b = struct.pack("<BIBH4i4iB4H", version, updates, shutdown, mode_word, *targets, *goals,
+                    servo_word, *servo_pos)
+    b += struct.pack("<12f", *pid[0], *pid[1], *pid[2])
+    b += struct.pack("<9b9b", *gyro, *compass)
+    b += struct.pack("<16f", *(v for row in inverse for v in row), *ticks_to_rad)
     assert len(b) == TRANSFER_LEN
     return b
 
@@ -93,6 +100,58 @@ def make(path):
     with open(path, "wb") as f:
         for tick in range(1, END_TICK):
             t = transfer_at(tick)
+            f.write(b"\x01" + t if t is not None else b"\x00" + bytes(TRANSFER_LEN))
+
+
+# The budget run (`make-budget`, for firmware/budget/run.sh): a shutdown transfer, then from tick
+# 20 a transfer every PERIOD ticks until BUDGET_LAST, then nothing (the comm-loss BRAKE ends the
+# run). count.py lets the REDUCED window of 1000 ticks pass before it counts, then samples about
+# 200 ticks; the transfers run on for a few hundred ticks more, so every counted unit meets them.
+MOTOR_PID_SPEED, MOTOR_PID_POS, IMU_ORIENTATION, SAVE_IMU_CAL, KINEMATICS = (1 << n for n in range(5))
+BUDGET_LAST = 1800
+BUDGET_END = BUDGET_LAST + 200
+SERVO_ENABLED = 2
+# One gain set, within both mcu::pi_spi::SPEED_BOUNDS (kp ≤ 10, ki ≤ 1000, kd ≤ 0.1) and
+# POSITION_BOUNDS (kp ≤ 100, ki ≤ 1000, kd ≤ 1), each above the per-sample resolution at 1 kHz
+# (ki·0.001 and kd·1000 in Q16.16): the seed sends one block for both flags.
+BUDGET_PID = ((0.5,) * 4, (1.0,) * 4, (0.001,) * 4)
+IDENTITY = (1, 0, 0, 0, 1, 0, 0, 0, 1)
+# A quarter turn about z (a proper rotation): alternating it with the identity makes every
+# orientation update change the gyro's axes (the fusion's quaternion is turned), the costlier path;
+# an orientation equal to the one in force is only checked.
+QUARTER_Z = (0, -1, 0, 1, 0, 0, 0, 0, 1)
+# Mecanum-style inverse kinematics: wheel radius R, half track + half wheelbase T; 1440 counts/rev.
+R, T = 0.0325, 0.18
+INVERSE = ((R / 4,) * 4, (0.0,) * 4, (-R / (2 * T), R / (2 * T), -R / (2 * T), R / (2 * T)))
+TICKS_TO_RAD = (2 * math.pi / 1440,) * 4
+# Per motor in each mode: PWM duty (of 399), MAV speed (encoder ticks/s, 1 rev/s), MTP goal
+# (2 revolutions) under a speed cap of 1 rev/s.
+BUDGET_MODES = (PWM, MAV, MTP, PASSIV_BRAKE)
+
+
+def budget_transfer(k):
+    """The k-th transfer after the shutdown one: the four modes rotated by k, servos enabled,
+    both gain sets and the orientation in every transfer, the kinematics in every other one
+    (a configuration restarts the odometry from a new baseline: the odometry update right after
+    one only takes the counts, the next integrates)."""
+    modes = [BUDGET_MODES[(n + k) % 4] for n in range(4)]
+    targets = [{PWM: 200, MAV: 1440, MTP: 1440}.get(m, 0) for m in modes]
+    goals = [2880 if m == MTP else 0 for m in modes]
+    updates = MOTOR_PID_SPEED | MOTOR_PID_POS | IMU_ORIENTATION | (KINEMATICS if k % 2 == 0 else 0)
+    return rx_buffer(modes, targets, updates=updates, goals=goals,
+                     servo_modes=(SERVO_ENABLED,) * 4, servo_pos=(1500, 1200, 1800, 2000),
+                     pid=BUDGET_PID, gyro=QUARTER_Z if k % 2 else IDENTITY, compass=IDENTITY,
+                     inverse=INVERSE, ticks_to_rad=TICKS_TO_RAD)
+
+
+def make_budget(path):
+    with open(path, "wb") as f:
+        for tick in range(1, BUDGET_END):
+            t = None
+            if tick == 10:
+                t = rx_buffer([PWM] * 4, [0] * 4, shutdown=SHUTDOWN_MOTOR)
+            elif 20 <= tick <= BUDGET_LAST and tick % PERIOD == 0:
+                t = budget_transfer(tick // PERIOD - 2)
             f.write(b"\x01" + t if t is not None else b"\x00" + bytes(TRANSFER_LEN))
 
 
@@ -180,6 +239,8 @@ def check(trace_path, feedback_path):
 if __name__ == "__main__":
     if sys.argv[1:2] == ["make"]:
         make(sys.argv[2])
+    elif sys.argv[1:2] == ["make-budget"]:
+        make_budget(sys.argv[2])
     elif sys.argv[1:2] == ["check"]:
         sys.exit(check(sys.argv[2], sys.argv[3]))
     else:
