@@ -382,7 +382,12 @@ fn drive_with_enable_runs_the_motors_at_the_commanded_duties_and_the_board_brake
         lines_of(|sink| device::run_cdc(board.open(), &CdcVerb::Drive(plan), WAIT, sink));
     assert_eq!(v, Verdict::Done, "{:?}", last(&lines));
     let end = last(&lines);
-    assert_eq!(end["frames_sent"], 30);
+    // Every planned frame is sent on its deadline, or its deadline is counted as skipped (a
+    // loaded machine stalled the host for more than a period; the frames then stop on time rather
+    // than run late), never more than planned.
+    let sent = end["frames_sent"].as_u64().unwrap();
+    let skipped = end["pacing"]["skipped"].as_u64().unwrap();
+    assert!(sent <= 30 && sent + skipped >= 30, "{end}");
     assert_eq!(end["enable"]["reply"]["type"], "ack");
     assert_eq!(end["enable"]["reply"]["msg_id"], 2);
     assert_eq!(end["enable"]["reply"]["result"], 0);
@@ -644,15 +649,19 @@ fn teensy_cal_and_move_are_echoed_with_success_and_the_arm_moves() {
     assert_eq!(v, Verdict::Done, "{end}");
     assert_eq!(end["cal"]["reply"]["cmd_type"], "cal");
     assert_eq!(end["cal"]["reply"]["cmd_success"], 1);
-    assert_eq!(end["mtrs_sent"], 30);
-    assert_eq!(end["echoes_ok"], 30);
+    // As in the drive test: every planned frame sent or its deadline counted as skipped; every
+    // frame sent is echoed with success.
+    let sent = end["mtrs_sent"].as_u64().unwrap();
+    let skipped = end["pacing"]["skipped"].as_u64().unwrap();
+    assert!(sent <= 30 && sent + skipped >= 30, "{end}");
+    assert_eq!(end["echoes_ok"], sent);
     assert_eq!(end["echoes_missing"], 0);
     let mtrs: Vec<&Value> = lines
         .iter()
         .filter_map(|l| l.get("message"))
         .filter(|m| m["cmd_type"] == "mtrs")
         .collect();
-    assert_eq!(mtrs.len(), 30, "every echo printed");
+    assert_eq!(mtrs.len() as u64, sent, "every echo printed");
     assert!(mtrs
         .iter()
         .all(|m| m["cmd_success"] == 1 && m["mtr_angles"] == serde_json::json!([10, 20, -30, 0])));
