@@ -471,7 +471,7 @@ enum Cmd {
         #[arg(long, default_value_t = 2_000_000)]
         speed: u32,
         /// How long, s (1000 exchanges per second).
-        #[arg(long, default_value_t = 10.0)]
+        #[arg(long, default_value_t = 10.0, allow_negative_numbers = true)]
         seconds: f64,
         /// cmd_vel forward speed, m/s.
         #[arg(long = "v", default_value_t = 0.0, allow_negative_numbers = true)]
