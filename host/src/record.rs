@@ -469,9 +469,13 @@ pub struct Recorder {
 }
 
 impl Recorder {
-    /// Creates `path` (`.mcap` or `.csv`).
+    /// Creates `path` (`.mcap` or `.csv`). Missing parent directories are created.
     pub fn create(path: &Path, cfg: RecordConfig) -> Result<Self, RecordError> {
-        let sink = match Format::from_path(path)? {
+        let format = Format::from_path(path)?;
+        if let Some(dir) = path.parent().filter(|d| !d.as_os_str().is_empty()) {
+            std::fs::create_dir_all(dir).map_err(|e| RecordError::Io(dir.to_path_buf(), e))?;
+        }
+        let sink = match format {
             Format::Mcap => Sink::Mcap(Box::new(McapSink::create(path)?)),
             Format::Csv => {
                 let f = File::create(path).map_err(|e| RecordError::Io(path.to_path_buf(), e))?;
