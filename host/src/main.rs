@@ -455,9 +455,10 @@ enum Cmd {
     /// FILE.csv: a header line, then one row per exchange (command, feedback, mode and faults by
     /// name, odometry, arming state, clock sync, diagnostics; in --sim also the plant's truth).
     ///
-    /// Last line on stdout: {"out":..,"exchanges":..,"feedback":..,"diagnostics":..}. Exit 2 on a
-    /// bad argument (checked before the device is opened) or a failed exchange (the file is
-    /// completed up to it).
+    /// Last line on stdout: {"out":..,"exchanges":..,"feedback":..,"diagnostics":..}. Ctrl-C
+    /// (SIGINT, SIGTERM, SIGHUP) ends the recording early with a complete file. Exit 2 on a bad
+    /// argument (checked before the device is opened) or a failed exchange (the file is completed
+    /// up to it).
     Record {
         /// spidev device of the AMR link (/dev/spidevB.C); none with --sim.
         device: Option<String>,
@@ -762,8 +763,14 @@ fn record(
     let plan = RecordPlan::new(seconds, v, w).map_err(|e| e.to_string())?;
     Format::from_path(out).map_err(|e| e.to_string())?;
     let summary = match (sim, device) {
-        (true, None) => record::record_sim(out, &plan, RecordConfig::default()),
+        (true, None) => {
+            let mut signals = pi::Signals::block()?;
+            record::record_sim(out, &plan, RecordConfig::default(), &mut || {
+                signals.received()
+            })
+        }
         (false, Some(dev)) => {
+            let mut signals = pi::Signals::block()?;
             let t = open_spi(dev, speed)?;
             let mut link = Link::new(Boxed(t), Bridge::new(BridgeConfig::DEFAULT));
             let origin = std::time::SystemTime::now()
@@ -773,7 +780,7 @@ fn record(
                 time_origin_ns: origin,
                 ..RecordConfig::default()
             };
-            record::record_link(&mut link, out, &plan, cfg)
+            record::record_link(&mut link, out, &plan, cfg, &mut || signals.received())
         }
         (true, Some(d)) => {
             return Err(format!(

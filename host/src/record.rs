@@ -33,7 +33,7 @@ use std::path::{Path, PathBuf};
 use protocol::amr::{self, McuFrame, MotorCommand, MotorFeedback, FRAME_LEN};
 use statemachine::{FaultFlags, Mode};
 
-use crate::bridge::{ArmState, Bridge, Diagnostic};
+use crate::bridge::{ArmState, Bridge, BridgeStats, Diagnostic};
 use crate::kinematics::DiffDrive;
 use crate::link::{ExchangeRecord, Link};
 use crate::simlink::{SimMcu, Truth};
@@ -249,6 +249,10 @@ pub struct Row {
     pub feedback_age_us: Option<u64>,
     /// The bridge's arming state after the exchange.
     pub arm_state: ArmState,
+    /// The bridge's counters after the exchange.
+    pub stats: BridgeStats,
+    /// Exchanges that failed at the transport so far.
+    pub transport_errors: u64,
     /// Clock sync acquired.
     pub clock_synced: bool,
     /// MCU − host clock offset, µs, if known.
@@ -536,6 +540,8 @@ impl Recorder {
             twist,
             feedback_age_us: self.last_feedback_us.map(|t| e.t_recv_us.saturating_sub(t)),
             arm_state: bridge.state(),
+            stats: bridge.stats,
+            transport_errors: link.transport_errors,
             clock_synced: bridge.clock.is_synced(e.t_recv_us),
             clock_offset_us: bridge.clock.offset_at(e.t_recv_us as f64),
             diagnostics: diags.iter().map(|(_, d)| d.name()).collect(),
@@ -717,6 +723,12 @@ fn diagnostics(row: &Row, raised: &[&'static str], stamp: Time) -> DiagnosticArr
         values: vec![
             kv("exchanges", row.index.saturating_add(1)),
             kv("arm_state", format!("{:?}", row.arm_state)),
+            kv("commands", row.stats.commands),
+            kv("feedback_ok", row.stats.feedback_ok),
+            kv("feedback_rejected", row.stats.feedback_rejected),
+            kv("not_accepted", row.stats.not_accepted),
+            kv("info_frames", row.stats.info_frames),
+            kv("transport_errors", row.transport_errors),
             kv("diagnostics", raised.join("|")),
         ],
     };
@@ -792,11 +804,13 @@ impl RecordPlan {
 pub const WIND_DOWN_EXCHANGES: u32 = 50;
 
 /// Records `plan` against the simulated board in lockstep (deterministic): the bridge armed at
-/// the start if the plan moves, cmd_vel fresh in every exchange.
+/// the start if the plan moves, cmd_vel fresh in every exchange. `stop` returning true ends the
+/// recording early (the file is completed).
 pub fn record_sim(
     out: &Path,
     plan: &RecordPlan,
     cfg: RecordConfig,
+    stop: &mut dyn FnMut() -> bool,
 ) -> Result<RecordSummary, RecordError> {
     let mut rec = Recorder::create(out, cfg)?;
     let mut link = Link::new(SimMcu::lockstep(), Bridge::new(Default::default()));
@@ -804,6 +818,9 @@ pub fn record_sim(
         link.bridge.arm(link.transport.now_us());
     }
     for _ in 0..plan.exchanges {
+        if stop() {
+            break;
+        }
         link.bridge.cmd_vel(link.transport.now_us(), plan.v, plan.w);
         let d = link.sim_cycle().map_err(RecordError::Link)?;
         let truth = link.transport.truth();
@@ -814,12 +831,14 @@ pub fn record_sim(
 
 /// Records `plan` on a device at the link's 1 kHz pacing, then winds down
 /// ([`WIND_DOWN_EXCHANGES`] disarmed exchanges). A failed exchange ends the recording (the file is
-/// completed first) with the error.
+/// completed first) with the error; `stop` returning true (Ctrl-C) ends it early, wound down and
+/// completed.
 pub fn record_link<T: Transport>(
     link: &mut Link<T>,
     out: &Path,
     plan: &RecordPlan,
     cfg: RecordConfig,
+    stop: &mut dyn FnMut() -> bool,
 ) -> Result<RecordSummary, RecordError> {
     let mut rec = Recorder::create(out, cfg)?;
     if plan.arms() {
@@ -827,6 +846,9 @@ pub fn record_link<T: Transport>(
     }
     let mut failed = None;
     for _ in 0..plan.exchanges {
+        if stop() {
+            break;
+        }
         link.bridge.cmd_vel(link.now_us(), plan.v, plan.w);
         match link.cycle() {
             Ok(d) => rec.record(link, (plan.v, plan.w), &d, None)?,

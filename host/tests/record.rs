@@ -172,3 +172,41 @@ fn bad_arguments_are_refused_before_anything_runs() {
     assert!(!bag.exists());
     assert!(!std::path::Path::new("x.csv").exists());
 }
+
+#[test]
+fn ctrl_c_ends_a_recording_with_a_complete_file() {
+    use nix::sys::signal::{kill, Signal};
+    use nix::unistd::Pid;
+    let path = tmp("interrupted.mcap");
+    let child = Command::new(env!("CARGO_BIN_EXE_motorlink"))
+        .args([
+            "record",
+            "--sim",
+            "--seconds",
+            "3600",
+            "--v",
+            "0.2",
+            "--out",
+        ])
+        .arg(&path)
+        .stdout(std::process::Stdio::piped())
+        .spawn()
+        .unwrap();
+    // The file is created after the signals are taken over: from then on SIGINT is a request.
+    while !path.exists() {
+        std::thread::sleep(std::time::Duration::from_millis(5));
+    }
+    kill(Pid::from_raw(child.id() as i32), Signal::SIGINT).unwrap();
+    let out = child.wait_with_output().unwrap();
+    assert!(out.status.success(), "{out:?}");
+    let last: serde_json::Value =
+        serde_json::from_str(String::from_utf8_lossy(&out.stdout).lines().last().unwrap()).unwrap();
+    let n = last["exchanges"].as_u64().unwrap();
+    assert!(n < 3_600_000, "{last}");
+    // A complete file: its summary section counts what the process said it wrote.
+    let bytes = std::fs::read(&path).unwrap();
+    let stats = mcap::Summary::read(&bytes).unwrap().unwrap().stats.unwrap();
+    let per_exchange = 4 * n + n / 100;
+    assert_eq!(stats.message_count, per_exchange, "{last}");
+    std::fs::remove_file(&path).ok();
+}
