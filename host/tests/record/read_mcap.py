@@ -106,8 +106,13 @@ def main():
     expect = a.v * (a.seconds - 0.5)
     check(sign * xs[-1] > 0.75 * abs(expect) and sign * xs[-1] < abs(a.v) * a.seconds,
           f'odom x at the end {xs[-1]:.4f} m for v {a.v} over {a.seconds} s')
-    v_end = odom[-1][1].twist.twist.linear.x
-    check(abs(v_end - a.v) < 0.1 * abs(a.v) + 0.01, f'odom twist at the end {v_end:.4f} m/s')
+    # The twist comes from the board's speed estimate, which moves in steps of one encoder count
+    # per estimator window (0.96 rad/s, 0.077 m/s at the wheel): over the last 0.5 s its mean is
+    # the commanded speed.
+    tail = [m.twist.twist.linear.x for _, m in odom[-500:]]
+    v_end = sum(tail) / len(tail)
+    check(abs(v_end - a.v) < 0.05 * abs(a.v) + 0.005,
+          f'odom twist over the last 0.5 s {v_end:.4f} m/s')
     q = odom[-1][1].pose.pose.orientation
     check(abs(q.x**2 + q.y**2 + q.z**2 + q.w**2 - 1) < 1e-9, 'odom orientation is a unit quaternion')
 
