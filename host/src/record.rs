@@ -694,6 +694,13 @@ fn diagnostics(row: &Row, raised: &[&'static str], stamp: Time) -> DiagnosticArr
                 kv("mcu_timestamp_us", f.timestamp_us),
                 kv("feedback_seq", f.seq),
                 kv("cmd_seq", f.cmd_seq),
+                // Commands sent since the last one the MCU accepted, this one included: 1 while
+                // every command is accepted (the feedback answers the previous exchange), growing
+                // by one per exchange while the MCU refuses or misses them.
+                kv(
+                    "commands_since_accepted",
+                    row.command.map_or(0, |c| c.seq.wrapping_sub(f.cmd_seq)),
+                ),
             ],
         },
         None => DiagnosticStatus {

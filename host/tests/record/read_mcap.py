@@ -131,6 +131,8 @@ def main():
     values = {kv.key: kv.value for kv in last.values}
     check(last.message == 'NORMAL' and values.get('mode') == 'NORMAL' and last.level == 0,
           f'/diagnostics at the end: {last.message}, level {last.level}')
+    check(values.get('commands_since_accepted') == '1' and values.get('faults') == '',
+          f'/diagnostics at the end: every command accepted, no fault ({values})')
     check(diags[-1].status[2].message == 'synced', 'clock synced at the end')
 
     print('FAILED: ' + '; '.join(FAILED) if FAILED else 'all checks passed')
