@@ -73,3 +73,41 @@ fn every_csv_row_has_the_header_s_columns() {
     assert!(row.other.is_some());
     assert_eq!(csv_line(&row).split(',').count(), columns);
 }
+
+#[test]
+fn a_paced_recording_winds_down_unrecorded_and_stops_on_request() {
+    let path = std::env::temp_dir().join(format!("motorlink-link-{}.csv", std::process::id()));
+    let plan = RecordPlan::new(0.03, 0.2, 0.0).unwrap();
+    let mut link = Link::new(SimMcu::lockstep(), Bridge::new(Default::default()));
+    let s = record_link(
+        &mut link,
+        &path,
+        &plan,
+        RecordConfig::default(),
+        &mut || false,
+    )
+    .unwrap();
+    // 30 exchanges recorded, then the disarmed wind-down, not recorded.
+    assert_eq!(s.exchanges, 30);
+    assert_eq!(
+        link.transport.exchanges(),
+        30 + u64::from(WIND_DOWN_EXCHANGES)
+    );
+    assert_eq!(link.bridge.state(), ArmState::Disarmed);
+    let rows = std::fs::read_to_string(&path).unwrap().lines().count();
+    assert_eq!(rows, 1 + 30);
+    // A stop request after 10 exchanges: 10 rows, the wind-down still sent.
+    let mut link = Link::new(SimMcu::lockstep(), Bridge::new(Default::default()));
+    let mut asked = 0;
+    let mut stop = || {
+        asked += 1;
+        asked > 10
+    };
+    let s = record_link(&mut link, &path, &plan, RecordConfig::default(), &mut stop).unwrap();
+    assert_eq!(s.exchanges, 10);
+    assert_eq!(
+        link.transport.exchanges(),
+        10 + u64::from(WIND_DOWN_EXCHANGES)
+    );
+    std::fs::remove_file(&path).ok();
+}
