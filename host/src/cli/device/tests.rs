@@ -158,7 +158,12 @@ fn a_drive_without_any_reply_is_no_reply() {
     let (v, lines) =
         collect(|sink| run_cdc(ScriptedStream::default(), &CdcVerb::Drive(plan), WAIT, sink));
     assert_eq!(v, Verdict::NoReply);
-    assert_eq!(lines.last().unwrap()["frames_sent"], 10);
+    // 0.2 s at 50 Hz plans 10 frames; a loaded machine may skip a deadline (counted), never send more.
+    let end = lines.last().unwrap();
+    let sent = end["frames_sent"].as_u64().unwrap();
+    let skipped = end["pacing"]["skipped"].as_u64().unwrap();
+    assert!(sent <= 10, "at most the planned frames: {sent}");
+    assert!(sent + skipped >= 10, "every planned frame sent or its deadline counted skipped");
 }
 
 #[test]
