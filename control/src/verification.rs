@@ -38,7 +38,7 @@ fn gains(src: &mut impl Source) -> PidGains {
     }
 }
 
-/// PID: from any valid state, one step keeps |u| ≤ out_limit and |i| ≤ i_limit.
+/// P-8: PID: from any valid state, one step keeps |u| ≤ out_limit and |i| ≤ i_limit.
 pub fn pid_bounded(src: &mut impl Source) {
     let g = gains(src);
     assume!(src, g.is_valid());
@@ -75,7 +75,7 @@ pub fn pid_bounded(src: &mut impl Source) {
     );
 }
 
-/// Current PI: |duty| ≤ min(out_limit, 1) from any valid state.
+/// P-9: Current PI: |duty| ≤ min(out_limit, 1) from any valid state.
 pub fn current_pi_bounded(src: &mut impl Source) {
     let g = gains(src);
     assume!(src, g.is_valid());
@@ -91,7 +91,7 @@ pub fn current_pi_bounded(src: &mut impl Source) {
     cover!(src, d2 > Q::ZERO && d2 < lim, "unsaturated duty");
 }
 
-/// Rate limiter: |Δ| ≤ max_step, never past the target, exact when within one step.
+/// P-10: Rate limiter: |Δ| ≤ max_step, never past the target, exact when within one step.
 pub fn rate_limiter_bounded(src: &mut impl Source) {
     let step = q(src);
     let start = q(src);
@@ -130,7 +130,7 @@ const GEOMETRIES: [(Q, Q); 6] = [
     (Q::lit("0.01"), Q::const_from_int(10)),
 ];
 
-/// Kinematics conversions never panic or overflow for any twist and any wheel speeds; zero maps to
+/// P-12: Kinematics conversions never panic or overflow for any twist and any wheel speeds; zero maps to
 /// zero, a straight twist gives equal wheel speeds, equal wheel speeds give no yaw.
 pub fn kinematics_total(src: &mut impl Source) {
     for &(base, radius) in &GEOMETRIES {
@@ -161,7 +161,7 @@ pub fn kinematics_total(src: &mut impl Source) {
     }
 }
 
-/// Construction of any geometry never panics, refuses a radius outside 1 mm ..= 10 m or a wheelbase
+/// P-12: Construction of any geometry never panics, refuses a radius outside 1 mm ..= 10 m or a wheelbase
 /// outside 1 cm ..= 64 m, and accepts every geometry inside both ranges.
 pub fn geometry_checked(src: &mut impl Source) {
     // Any value, or (for the twin's sake: random bits rarely land in range) one near the ranges.
@@ -204,7 +204,7 @@ pub fn geometry_checked(src: &mut impl Source) {
     );
 }
 
-/// Bridge mapping: both compares ≤ ARR and at most one non-zero (never both high sides on).
+/// P-11: Bridge mapping: both compares ≤ ARR and at most one non-zero (never both high sides on).
 pub fn bridge_compare_safe(src: &mut impl Source) {
     let duty = q(src);
     let arr = src.u16();
@@ -221,7 +221,7 @@ pub fn bridge_compare_safe(src: &mut impl Source) {
     cover!(src, c.b > 0, "reverse");
 }
 
-/// ADC scaling never panics and |i| ≤ 4095·|gain| (saturating at the Q16.16 range).
+/// P-12: ADC scaling never panics and |i| ≤ 4095·|gain| (saturating at the Q16.16 range).
 pub fn adc_scaling_bounded(src: &mut impl Source) {
     let counts = src.u16();
     let offset = src.u16();
@@ -237,7 +237,7 @@ pub fn adc_scaling_bounded(src: &mut impl Source) {
     cover!(src, i < Q::ZERO, "negative current");
 }
 
-/// Speed estimator: any counter sequence, no panic, estimate = scale × window delta.
+/// P-12: Speed estimator: any counter sequence, no panic, estimate = scale × window delta.
 pub fn speed_estimator_total(src: &mut impl Source) {
     let scale = q(src);
     let mut e = SpeedEstimator::new(src.u16(), scale);
@@ -319,7 +319,7 @@ fn profile_case(src: &mut impl Source, lim: &ProfileLimits) -> (Trapezoid, Posit
     (Trapezoid::from_parts(pos, frac, vel), target)
 }
 
-/// Profile, property 1 (and no panic or overflow for any input): from any valid state, toward any
+/// INV-20: Profile, property 1 (and no panic or overflow for any input): from any valid state, toward any
 /// target at any cap, the new position is within the travel and never passes the target clamped
 /// into it — a position at or below it stays at or below it, and symmetrically.
 pub fn profile_stays_within_travel(src: &mut impl Source) {
@@ -363,7 +363,7 @@ pub fn profile_stays_within_travel(src: &mut impl Source) {
     );
 }
 
-/// Profile, property 2: from any valid state, toward any target at any cap, |v| ≤ max(cap, 0)
+/// INV-20: Profile, property 2: from any valid state, toward any target at any cap, |v| ≤ max(cap, 0)
 /// after the step, and the velocity changes by at most `accel_step` unless
 /// - the cap forced it: then |v_new| = cap < |v_old|, same sign (the cap only ever slows the axis);
 /// - the axis stopped on the target (reaching or passing it): on it, v_new = 0;
@@ -422,7 +422,7 @@ pub fn profile_speed_within_cap(src: &mut impl Source) {
     );
 }
 
-/// Profile, nominal operation: from a valid state that can stop before the target and the travel
+/// P-20: Profile, nominal operation: from a valid state that can stop before the target and the travel
 /// limits ([`Trapezoid::can_stop`], the states the profile plans), a step toward the same target at
 /// any cap changes the velocity by at most `accel_step` unless the cap forces it (no abrupt stop on
 /// the target or a limit, arrival included), and the new state can again stop: by induction a

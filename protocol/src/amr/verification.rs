@@ -152,7 +152,7 @@ fn decode_total<S: Source, M>(
     cover!(src, r == Err(RejectReason::Version), "version error");
 }
 
-/// [`decode_total`] for `decode_command`.
+/// P-21: [`decode_total`] for `decode_command`.
 pub(crate) fn check_decode_command_total(src: &mut impl Source) {
     decode_total(
         src,
@@ -161,7 +161,7 @@ pub(crate) fn check_decode_command_total(src: &mut impl Source) {
     );
 }
 
-/// [`decode_total`] for `decode_feedback`.
+/// P-21: [`decode_total`] for `decode_feedback`.
 pub(crate) fn check_decode_feedback_total(src: &mut impl Source) {
     decode_total(
         src,
@@ -170,12 +170,12 @@ pub(crate) fn check_decode_feedback_total(src: &mut impl Source) {
     );
 }
 
-/// [`decode_total`] for `decode_info`.
+/// P-21: [`decode_total`] for `decode_info`.
 pub(crate) fn check_decode_info_total(src: &mut impl Source) {
     decode_total(src, |s, f| encode_info(&any_info(s), f), decode_info);
 }
 
-/// [`decode_total`] for `decode_mcu_frame`, with valid frames of both kinds.
+/// P-21: [`decode_total`] for `decode_mcu_frame`, with valid frames of both kinds.
 pub(crate) fn check_decode_mcu_frame_total(src: &mut impl Source) {
     decode_total(
         src,
@@ -190,7 +190,7 @@ pub(crate) fn check_decode_mcu_frame_total(src: &mut impl Source) {
     );
 }
 
-/// encode → decode gives back the same command, bit for bit; out-of-range modes are refused, never truncated.
+/// P-21: encode → decode gives back the same command, bit for bit; out-of-range modes are refused, never truncated.
 pub(crate) fn check_command_round_trip(src: &mut impl Source) {
     let cmd = any_command(src);
     let mut f = [0u8; FRAME_LEN];
@@ -207,7 +207,7 @@ pub(crate) fn check_command_round_trip(src: &mut impl Source) {
     cover!(src, usize::from(f[0]) == MAX_COMMAND_LEN, "longest command");
 }
 
-/// encode → decode gives back the same feedback, bit for bit.
+/// P-21: encode → decode gives back the same feedback, bit for bit.
 pub(crate) fn check_feedback_round_trip(src: &mut impl Source) {
     let fb = any_feedback(src);
     let mut f = [0u8; FRAME_LEN];
@@ -227,7 +227,7 @@ pub(crate) fn check_feedback_round_trip(src: &mut impl Source) {
     cover!(src, fb.mode > 0xFF, "out-of-range mode refused");
 }
 
-/// encode → decode gives back the same info message, through `decode_info` and through
+/// P-21: encode → decode gives back the same info message, through `decode_info` and through
 /// `decode_mcu_frame`; `decode_feedback` refuses the frame as `Version` (no `protocol_version`), and
 /// `decode_info` refuses the feedback frame of any feedback the same way (no `info_version`).
 pub(crate) fn check_info_round_trip(src: &mut impl Source) {
@@ -250,7 +250,7 @@ pub(crate) fn check_info_round_trip(src: &mut impl Source) {
     cover!(src, info.board == BoardProfile::PiSpi, "last board profile");
 }
 
-/// Flipping any one of the 512 bits of a valid command frame makes it rejected.
+/// P-21: Flipping any one of the 512 bits of a valid command frame makes it rejected.
 pub(crate) fn check_command_bit_flip_detected(src: &mut impl Source) {
     let cmd = any_command(src);
     assume!(src, cmd.control_mode <= 0xFF);
@@ -275,7 +275,7 @@ pub(crate) fn check_command_bit_flip_detected(src: &mut impl Source) {
     cover!(src, byte >= CRC_OFFSET, "flip in crc");
 }
 
-/// Flipping any one of the 512 bits of a valid feedback frame makes it rejected.
+/// P-21: Flipping any one of the 512 bits of a valid feedback frame makes it rejected.
 pub(crate) fn check_feedback_bit_flip_detected(src: &mut impl Source) {
     let fb = any_feedback(src);
     let mut f = [0u8; FRAME_LEN];
@@ -287,7 +287,7 @@ pub(crate) fn check_feedback_bit_flip_detected(src: &mut impl Source) {
     cover!(src, bit / 8 < CRC_OFFSET, "flip before crc");
 }
 
-/// `open` (CRC, length, padding) returns a payload or `Crc` / `Framing` for every 64-byte input, and
+/// P-21: `open` (CRC, length, padding) returns a payload or `Crc` / `Framing` for every 64-byte input, and
 /// returns a payload only when the stored CRC (big-endian) matches the bytes before it and the
 /// payload is the `LEN` bytes after the length byte.
 ///
@@ -328,7 +328,7 @@ pub(crate) fn check_open_total(src: &mut impl Source) {
     );
 }
 
-/// The shape half of [`check_open_total`], for the Kani harness that replaces the CRC by any
+/// P-3: The shape half of [`check_open_total`], for the Kani harness that replaces the CRC by any
 /// value (`crc16::verification::model::any_checksum`): for every 64-byte input and whatever the
 /// CRC says, `open` returns a payload of exactly `LEN` ≤ [`MAX_PAYLOAD`] bytes, or `Crc` or
 /// `Framing`, and never panics. The twin of [`check_open_total`] checks the CRC half with the
@@ -365,7 +365,7 @@ pub(crate) fn check_open_shape(src: &mut impl Source) {
     );
 }
 
-/// Flipping any one of the 512 bits of the frame `f` (sealed: CRC good) makes `open`, and so both
+/// P-7, INV-11 (bytes side): Flipping any one of the 512 bits of the frame `f` (sealed: CRC good) makes `open`, and so both
 /// decoders, refuse it as `Crc`: every bit before the CRC is covered by it, and the CRC is stored
 /// big-endian, so a flip anywhere is a one-bit error pattern of the 64-byte codeword. Whether a
 /// pattern is caught does not depend on the frame's content (the checksum is affine, see
@@ -434,7 +434,7 @@ fn field_step<S: Source, M>(
     }
 }
 
-/// [`field_step`] of the command decode loop, from any command decoded so far.
+/// P-3: [`field_step`] of the command decode loop, from any command decoded so far.
 pub(crate) fn check_command_field_step(src: &mut impl Source) {
     let msg = (any_command(src), src.u32());
     if let Some((field, applied)) = field_step(src, msg, apply_command_field) {
@@ -457,7 +457,7 @@ pub(crate) fn check_command_field_step(src: &mut impl Source) {
     }
 }
 
-/// [`field_step`] of the feedback decode loop, from any feedback decoded so far.
+/// P-3: [`field_step`] of the feedback decode loop, from any feedback decoded so far.
 pub(crate) fn check_feedback_field_step(src: &mut impl Source) {
     let msg = (any_feedback(src), src.u32());
     if let Some((field, applied)) = field_step(src, msg, apply_feedback_field) {
@@ -469,7 +469,7 @@ pub(crate) fn check_feedback_field_step(src: &mut impl Source) {
     }
 }
 
-/// [`field_step`] of the info decode loop, from any info decoded so far.
+/// P-3: [`field_step`] of the info decode loop, from any info decoded so far.
 pub(crate) fn check_info_field_step(src: &mut impl Source) {
     let msg = (any_info(src), src.u32());
     if let Some((field, applied)) = field_step(src, msg, apply_info_field) {
@@ -652,7 +652,7 @@ fn field_round_trip<S: Source, M: Copy + Default>(
     (n, applied)
 }
 
-/// [`field_round_trip`] for every command field.
+/// P-6: [`field_round_trip`] for every command field.
 pub(crate) fn check_command_field_round_trip(src: &mut impl Source) {
     let cmd = any_command(src);
     let field = command_field::ALL[usize::from(src.below(command_field::ALL.len() as u8))];
@@ -669,7 +669,7 @@ pub(crate) fn check_command_field_round_trip(src: &mut impl Source) {
     );
 }
 
-/// [`field_round_trip`] for every feedback field.
+/// P-6: [`field_round_trip`] for every feedback field.
 pub(crate) fn check_feedback_field_round_trip(src: &mut impl Source) {
     use feedback_field as f;
     let fb = any_feedback(src);
@@ -689,7 +689,7 @@ pub(crate) fn check_feedback_field_round_trip(src: &mut impl Source) {
     );
 }
 
-/// [`field_round_trip`] for every info field (every value of its type is in range: the enums
+/// P-6: [`field_round_trip`] for every info field (every value of its type is in range: the enums
 /// hold only defined values, so the encoder never writes one the decoder refuses).
 pub(crate) fn check_info_field_round_trip(src: &mut impl Source) {
     use info_field as f;
@@ -707,7 +707,7 @@ pub(crate) fn check_info_field_round_trip(src: &mut impl Source) {
     );
 }
 
-/// A frame made as the encoders make it (any payload of any length at the front of the payload
+/// P-6: A frame made as the encoders make it (any payload of any length at the front of the payload
 /// region, zeros after it, `seal`) is opened to exactly that payload: the same bytes, in place.
 pub(crate) fn check_seal_open(src: &mut impl Source) {
     let mut f: [u8; FRAME_LEN] = src.bytes();

@@ -54,7 +54,7 @@ fn any_message_of(src: &mut impl Source, kind: u8) -> Message {
     }
 }
 
-/// `decode_frame` returns a message or a typed error for every input of every length up to
+/// P-4: `decode_frame` returns a message or a typed error for every input of every length up to
 /// [`MAX_FRAME_LEN`] (a longer slice cannot match `6 + LEN` and is refused at the length check).
 pub(crate) fn check_decode_frame_total(src: &mut impl Source) {
     let mut buf: [u8; MAX_FRAME_LEN] = src.bytes();
@@ -151,7 +151,7 @@ pub(crate) fn check_stream_total(src: &mut impl Source) {
     cover!(src, ok > 1, "several frames");
 }
 
-/// `candidate_at` from any state (any bytes, any length held, any start): never panics, and
+/// P-4: `candidate_at` from any state (any bytes, any length held, any start): never panics, and
 /// gives a verdict only where the bytes held from `start` on are a candidate: `AA 55`, then a LEN
 /// that makes the frame end exactly at the last byte held. A good CRC is never a framing error.
 pub(crate) fn check_candidate_at(src: &mut impl Source) {
@@ -204,7 +204,7 @@ pub(crate) fn check_candidate_at(src: &mut impl Source) {
     );
 }
 
-/// `append` from any state (any bytes, any count held and dropped, any counters): the byte goes
+/// P-4: `append` from any state (any bytes, any count held and dropped, any counters): the byte goes
 /// last; when the buffer is full the bytes held first move to its front (the oldest byte goes,
 /// counted, if none was dropped), in order; nothing else changes. [`model::append`] stands in for
 /// it with the counts alone.
@@ -243,7 +243,7 @@ pub(crate) fn check_append(src: &mut impl Source) {
     cover!(src, !full, "byte added");
 }
 
-/// `may_start` from any state and any position: never panics, and says yes only for a position
+/// P-4: `may_start` from any state and any position: never panics, and says yes only for a position
 /// held whose candidate can still end after the last byte held, that is fewer than
 /// `MAX_FRAME_LEN` bytes before the end (so a full buffer's first byte held is never its first
 /// byte after `advance`). [`model::may_start`] stands in for it with exactly this.
@@ -272,7 +272,7 @@ pub(crate) fn check_may_start(src: &mut impl Source) {
     cover!(src, yes && len - i == 1, "a lone AA");
 }
 
-/// One `push` from *any* state (up to a full buffer of any bytes, any of them already dropped,
+/// P-4: One `push` from *any* state (up to a full buffer of any bytes, any of them already dropped,
 /// any counters) never panics, never overfills, never lowers a counter; a delivered frame leaves
 /// nothing held, and otherwise fewer than `MAX_FRAME_LEN` bytes stay held (so when the next byte
 /// finds the buffer full, the byte it moves out is a dropped one). `push` has no other loops than
@@ -475,7 +475,7 @@ impl Reference {
 /// make candidates.
 const GARBAGE: usize = if cfg!(kani) { 3 } else { 24 };
 
-/// No valid frame is held back by the bytes before it: any garbage, then the frame of `m`, fed
+/// P-5: No valid frame is held back by the bytes before it: any garbage, then the frame of `m`, fed
 /// byte by byte, gives at every byte what the naive [`Reference`] says, and the frame is
 /// delivered at its last byte unless the garbage began a frame with a good CRC that took some
 /// of its bytes.
@@ -548,7 +548,7 @@ pub(crate) fn check_round_trip_of(src: &mut impl Source, kind: u8) -> Message {
     m
 }
 
-/// The stream half of [`check_round_trip_of`] on its own (one CRC computation fewer under Kani).
+/// P-6, P-21: The stream half of [`check_round_trip_of`] on its own (one CRC computation fewer under Kani).
 pub(crate) fn check_stream_round_trip_of(src: &mut impl Source, kind: u8) {
     let m = any_message_of(src, kind);
     let mut buf = [0u8; MAX_FRAME_LEN];
@@ -572,7 +572,7 @@ fn stream_delivers(m: &Message, buf: &[u8; MAX_FRAME_LEN], n: usize) {
     assert_eq!(got, Some(Ok(*m)));
 }
 
-/// encode → `decode_frame` gives back the same message, for one message kind (under Kani one
+/// P-6: encode → `decode_frame` gives back the same message, for one message kind (under Kani one
 /// harness per kind: with the kind symbolic every field sits at a symbolic offset). Returns the
 /// message and its frame.
 pub(crate) fn check_frame_round_trip_of(
@@ -612,7 +612,7 @@ pub(crate) enum Flip {
     OtherBytes,
 }
 
-/// [`check_bit_flip_detected`] for the frame of `m`. With the checksum affine over GF(2) (see
+/// P-7: [`check_bit_flip_detected`] for the frame of `m`. With the checksum affine over GF(2) (see
 /// `crc16::verification`), whether a flip in the covered bytes or the CRC is caught depends only
 /// on the flip and the frame length, not on the frame's content; a flip in the SOF or LEN is a
 /// framing error whatever the content. So one frame per length, every bit, covers every frame of

@@ -116,12 +116,12 @@ pub(crate) fn check_bursts_detected(src: &mut impl Source, order: Order, n: usiz
     cover!(src, body_hit && !crc_hit, "burst in the covered bytes only");
 }
 
-/// [`check_bursts_detected`] for the seed 000 frame: 62 covered bytes, CRC big-endian.
+/// P-1: [`check_bursts_detected`] for the seed 000 frame: 62 covered bytes, CRC big-endian.
 pub(crate) fn check_bursts_detected_seed000(src: &mut impl Source) {
     check_bursts_detected(src, Order::Big, MAX_COVERED);
 }
 
-/// [`check_bursts_detected`] for the longest seed 001 frame (IMU: 22 covered bytes), CRC
+/// P-1: [`check_bursts_detected`] for the longest seed 001 frame (IMU: 22 covered bytes), CRC
 /// little-endian.
 pub(crate) fn check_bursts_detected_seed001_imu(src: &mut impl Source) {
     check_bursts_detected(src, Order::Little, 22);
@@ -131,7 +131,7 @@ pub(crate) fn check_bursts_detected_seed001_imu(src: &mut impl Source) {
 /// 257 of its bytes), which is longer than every other covered run.
 const TOTAL_MAX: usize = crate::cdc::MAX_FRAME_LEN;
 
-/// [`checksum`] is total: any bytes of any length up to [`TOTAL_MAX`], never a panic.
+/// P-2: [`checksum`] is total: any bytes of any length up to [`TOTAL_MAX`], never a panic.
 pub(crate) fn check_checksum_total(src: &mut impl Source) {
     let buf: [u8; TOTAL_MAX] = src.bytes();
     let n = usize::from(src.u16()) % (TOTAL_MAX + 1);
@@ -193,7 +193,7 @@ pub(crate) mod model {
 mod proofs {
     use statemachine::harness::KaniSource;
 
-    /// Each block function returns for every register and every block (its contract).
+    /// P-2: Each block function returns for every register and every block (its contract).
     macro_rules! block_total {
         ($($harness:ident => $f:ident, $n:literal);+) => {$(
             #[kani::proof_for_contract(crate::crc16::$f)]

@@ -60,7 +60,7 @@ pub(crate) fn any_rx(src: &mut impl Source) -> RxBuffer {
     }
 }
 
-/// `decode_rx` and `decode_tx` return a buffer or a typed error for every input.
+/// P-4: `decode_rx` and `decode_tx` return a buffer or a typed error for every input.
 pub(crate) fn check_decode_total(src: &mut impl Source) {
     let mut rx = [0u8; RX_LEN];
     if src.bool() {
@@ -90,7 +90,7 @@ pub(crate) fn check_decode_total(src: &mut impl Source) {
     cover!(src, r == Err(RejectReason::Decode), "rx decode error");
 }
 
-/// encode → decode gives back the same buffers, bit for bit.
+/// P-6: encode → decode gives back the same buffers, bit for bit.
 pub(crate) fn check_round_trip(src: &mut impl Source) {
     let rx = any_rx(src);
     let mut b = [0u8; RX_LEN];
@@ -128,7 +128,7 @@ pub(crate) fn check_round_trip(src: &mut impl Source) {
     cover!(src, rx.updates.0.count_ones() % 2 == 1, "parity bit clear");
 }
 
-/// A single flipped bit in the `updates` word is always caught by the parity check.
+/// P-7: A single flipped bit in the `updates` word is always caught by the parity check.
 pub(crate) fn check_updates_bit_flip_detected(src: &mut impl Source) {
     let rx = any_rx(src);
     let mut b = [0u8; RX_LEN];
@@ -141,7 +141,7 @@ pub(crate) fn check_updates_bit_flip_detected(src: &mut impl Source) {
     cover!(src, bit > 7, "flip of a reserved bit");
 }
 
-/// The checks come first and in the seed's order, for any bytes: a `transferVersion` other than 15
+/// INV-22 (bytes half): The checks come first and in the seed's order, for any bytes: a `transferVersion` other than 15
 /// is `Err(Version)` whatever follows it; with version 15, an `updates` word of even parity is
 /// `Err(Parity)` whatever follows it. (The bytes half of the `pi-spi` board's INV-22; the board's
 /// half, a refusal changes nothing, is `mcu`'s `verify_pi_spi_refusal_changes_nothing`.)

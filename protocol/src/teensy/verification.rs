@@ -23,7 +23,7 @@ fn any_msg(src: &mut impl Source) -> Msg {
     }
 }
 
-/// Both decoders return a command or a typed error for every input up to the robust frame size.
+/// P-21: Both decoders return a command or a typed error for every input up to the robust frame size.
 pub(crate) fn check_decode_total(src: &mut impl Source) {
     let mut buf = [0u8; ROBUST_BUF];
     // Under Kani any bytes of any length (shape 0) already include every frame; the other shapes
@@ -65,7 +65,7 @@ pub(crate) fn check_decode_total(src: &mut impl Source) {
     }
 }
 
-/// encode → decode round-trips in both formats.
+/// P-21: encode → decode round-trips in both formats.
 pub(crate) fn check_round_trip(src: &mut impl Source) {
     let m = any_msg(src);
     let mut buf = [0u8; ROBUST_BUF];
@@ -86,7 +86,7 @@ pub(crate) fn check_round_trip(src: &mut impl Source) {
     cover!(src, m.cmd_type == CmdType::Mtrs, "motor command");
 }
 
-/// The robust frame's body, before COBS, round-trips: `encode_body` → `decode_body` gives back
+/// P-6: The robust frame's body, before COBS, round-trips: `encode_body` → `decode_body` gives back
 /// the same command (real CRC). With [`check_unstuff_inverts_stuff`] and
 /// [`check_stream_delivers_frame`] this is the robust half of [`check_round_trip`] in pieces Kani
 /// can prove.
@@ -102,7 +102,7 @@ pub(crate) fn check_body_round_trip(src: &mut impl Source) {
     );
 }
 
-/// A frame's bytes fed to a fresh `RobustDecoder` give nothing until the terminator, and then
+/// P-21: A frame's bytes fed to a fresh `RobustDecoder` give nothing until the terminator, and then
 /// exactly what `decode_robust` says of the frame: any non-zero bytes of a frame's length, then 0x00.
 pub(crate) fn check_stream_delivers_frame(src: &mut impl Source) {
     let mut frame: [u8; FRAME] = src.bytes();
@@ -132,7 +132,7 @@ pub(crate) fn check_stream_delivers_frame(src: &mut impl Source) {
     );
 }
 
-/// A flipped bit anywhere in a robust frame is refused.
+/// P-21: A flipped bit anywhere in a robust frame is refused.
 pub(crate) fn check_bit_flip_detected(src: &mut impl Source) {
     let m = any_msg(src);
     let mut buf = [0u8; ROBUST_BUF];
@@ -144,7 +144,7 @@ pub(crate) fn check_bit_flip_detected(src: &mut impl Source) {
     cover!(src, bit / 8 < n - 1, "flip in body");
 }
 
-/// `decode_legacy` returns a command, `Framing` or `Decode` for every input of every length up to
+/// P-4: `decode_legacy` returns a command, `Framing` or `Decode` for every input of every length up to
 /// one byte past a legacy packet.
 pub(crate) fn check_legacy_total(src: &mut impl Source) {
     let mut buf: [u8; Msg::LEGACY_LEN + 1] = src.bytes();
@@ -171,7 +171,7 @@ pub(crate) fn check_legacy_total(src: &mut impl Source) {
     );
 }
 
-/// `decode_robust` returns a command or a typed error for every input of every length up to one
+/// P-4: `decode_robust` returns a command or a typed error for every input of every length up to one
 /// byte past the largest robust frame of any motor count. Under Kani the CRC is replaced by any
 /// value (`crc16::verification::model::any_checksum`; `crc16::verify_checksum_total` proves the real
 /// one returns for every input).
@@ -200,7 +200,7 @@ pub(crate) fn check_robust_total(src: &mut impl Source) {
     cover!(src, r == Err(RejectReason::Framing), "robust framing error");
 }
 
-/// One `RobustDecoder::push` from any state (any bytes, any number held up to its limit, any
+/// P-4: One `RobustDecoder::push` from any state (any bytes, any number held up to its limit, any
 /// counters) never panics, keeps the bytes held within the limit, never lowers a counter, answers
 /// only at a 0x00, and keeps exactly the last non-zero bytes of the run: after a non-zero byte the
 /// bytes held are the ones held before, the oldest dropped if the limit was reached, then the new
@@ -301,7 +301,7 @@ pub(crate) fn check_against_reference(stream: &[u8], got: Option<Result<Msg, Rej
 /// worth, biased toward zeros and the frame's own bytes.
 const GARBAGE: usize = if cfg!(kani) { 1 } else { 3 * FRAME };
 
-/// No valid frame is held back by the bytes before it: any garbage, then a frame, fed byte by
+/// P-5: No valid frame is held back by the bytes before it: any garbage, then a frame, fed byte by
 /// byte, gives at every byte what the [`reference`] says, and the frame is delivered at its 0x00.
 /// Under Kani the frame is the harnesses' sample command; the twin takes any command.
 pub(crate) fn check_robust_holds_back_no_frame(src: &mut impl Source) {
@@ -411,7 +411,7 @@ fn with_zeros(src: &mut impl Source, body: &mut [u8]) {
     }
 }
 
-/// `unstuff` inverts [`stuff`] for every body, and the twin checks that corncobs (the encoder of
+/// P-6: `unstuff` inverts [`stuff`] for every body, and the twin checks that corncobs (the encoder of
 /// the robust frames) writes exactly [`stuff`]'s frame: together, every robust frame sent decodes
 /// to the body it was made of.
 pub(crate) fn check_unstuff_inverts_stuff(src: &mut impl Source) {
@@ -436,7 +436,7 @@ pub(crate) fn check_unstuff_inverts_stuff(src: &mut impl Source) {
     );
 }
 
-/// `unstuff` never panics on any input of any length up to one byte past a frame, decodes a frame
+/// P-4: `unstuff` never panics on any input of any length up to one byte past a frame, decodes a frame
 /// of `n` bytes to `n − 2`, accepts only the frame length's frames that [`stuff`] makes (so each
 /// body has exactly one frame, and a changed frame either decodes to a changed body or is
 /// refused), and, in the twin, agrees with corncobs' decoder.
@@ -489,7 +489,7 @@ pub(crate) fn check_unstuff_total(src: &mut impl Source) {
     );
 }
 
-/// encode → decode of the legacy packet gives back the same command (no CRC on this path).
+/// P-6: encode → decode of the legacy packet gives back the same command (no CRC on this path).
 pub(crate) fn check_legacy_round_trip(src: &mut impl Source) {
     let m = any_msg(src);
     let mut buf = [0u8; Msg::LEGACY_LEN];
