@@ -109,7 +109,10 @@ pub fn rate_limiter_bounded(src: &mut impl Source) {
     assert!(next >= lo && next <= hi);
     let gap = i64::from(target.to_bits()).wrapping_sub(i64::from(start.to_bits()));
     if gap.unsigned_abs() <= lim.unsigned_abs() {
-        assert_eq!(next, target);
+        assert!(
+            next == target,
+            "P-10: within one step of the target the limiter lands on it"
+        );
     }
     cover!(src, next == target && start != target, "reached the target");
     cover!(src, next != target, "limited by the step");
@@ -148,14 +151,23 @@ pub fn kinematics_total(src: &mut impl Source) {
             v: Q::ZERO,
             omega: Q::ZERO,
         });
-        assert_eq!(zl, Q::ZERO);
-        assert_eq!(zr, Q::ZERO);
+        assert!(
+            zl == Q::ZERO,
+            "P-12: zero twist gives a zero left wheel speed"
+        );
+        assert!(
+            zr == Q::ZERO,
+            "P-12: zero twist gives a zero right wheel speed"
+        );
         let [sl, sr] = k.inverse(Twist {
             v: t.v,
             omega: Q::ZERO,
         });
-        assert_eq!(sl, sr);
-        assert_eq!(k.forward(l, l).omega, Q::ZERO);
+        assert!(sl == sr, "P-12: a straight twist gives equal wheel speeds");
+        assert!(
+            k.forward(l, l).omega == Q::ZERO,
+            "P-12: equal wheel speeds give no yaw"
+        );
         cover!(src, l != r, "turning twist");
         cover!(src, l == Q::MAX, "a wheel speed saturated");
     }
@@ -182,8 +194,14 @@ pub fn geometry_checked(src: &mut impl Source) {
     match k {
         Ok(k) => {
             assert!(radius_ok && base_ok);
-            assert_eq!(k.wheelbase(), base);
-            assert_eq!(k.wheel_radius(), radius);
+            assert!(
+                k.wheelbase() == base,
+                "P-12: an accepted geometry keeps its wheelbase"
+            );
+            assert!(
+                k.wheel_radius() == radius,
+                "P-12: an accepted geometry keeps its wheel radius"
+            );
         }
         Err(KinematicsError::WheelRadius) => assert!(!radius_ok),
         Err(KinematicsError::Wheelbase) => assert!(radius_ok && !base_ok),
@@ -212,10 +230,16 @@ pub fn bridge_compare_safe(src: &mut impl Source) {
     assert!(c.a <= arr && c.b <= arr);
     assert!(c.a == 0 || c.b == 0);
     if duty > Q::ZERO {
-        assert_eq!(c.b, 0);
+        assert!(
+            c.b == 0,
+            "P-11: a positive duty leaves the reverse compare at zero"
+        );
     }
     if duty < Q::ZERO {
-        assert_eq!(c.a, 0);
+        assert!(
+            c.a == 0,
+            "P-11: a negative duty leaves the forward compare at zero"
+        );
     }
     cover!(src, c.a == arr && arr > 0, "full forward");
     cover!(src, c.b > 0, "reverse");

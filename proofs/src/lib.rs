@@ -82,9 +82,9 @@ fn plausible_command(src: &mut impl Source) -> MotorCommand {
 /// A refusal moved nothing but the counters: `l` is `l0` after one refused event.
 fn assert_only_counted(l0: &Ladder, l: &Ladder) {
     assert!(unchanged(l0, l));
-    assert_eq!(
-        l.counters().rejected_total(),
-        l0.counters().rejected_total().saturating_add(1)
+    assert!(
+        l.counters().rejected_total() == l0.counters().rejected_total().saturating_add(1),
+        "INV-10: a refusal adds exactly one to the refusal count"
     );
 }
 
@@ -103,10 +103,16 @@ fn check_delivered_as_sent(src: &mut impl Source, l0: &Ladder, l: &Ladder, cmd: 
             let [left, right] = sp.axes.map(|a| a.target);
             assert!(left.saturating_sub(sent_l).saturating_abs() <= half);
             assert!(right.saturating_sub(sent_r).saturating_abs() <= half);
-            assert_eq!(sp.enable, cmd.enable);
-            assert_eq!(sp.seq(), Some(cmd.seq));
+            assert!(
+                sp.enable == cmd.enable,
+                "INV-12: the ladder holds the sent enable"
+            );
+            assert!(
+                sp.seq() == Some(cmd.seq),
+                "INV-12: the ladder holds the sent sequence number"
+            );
         }
-        assert_eq!(l.age(), 0);
+        assert!(l.age() == 0, "INV-12: a valid frame resets the age");
     }
     cover!(src, accepted, "accepted");
     cover!(
@@ -203,10 +209,9 @@ pub fn valid_frame_delivers_the_sent_command(src: &mut impl Source) {
     let cmd = plausible_command(src);
     let mut frame = [0u8; FRAME_LEN];
     encode_command(&cmd, &mut frame);
-    assert_eq!(
-        decode_command(&frame),
-        Ok(cmd),
-        "a freshly encoded frame decodes to itself"
+    assert!(
+        decode_command(&frame) == Ok(cmd),
+        "INV-12: a freshly encoded frame decodes to itself"
     );
     let (l, _) = receive(&l0, &frame);
     check_delivered_as_sent(src, &l0, &l, &cmd);

@@ -1525,7 +1525,6 @@ Not in this run: `verify_round_trip_ping`, `verify_round_trip_ack`.
 
     /// The real safety case, report and code agree (the same check as `cargo xtask trace`).
     #[test]
-    #[ignore = "the harness assertions get static messages in the next commit"]
     fn the_repository_passes() {
         let root = Path::new(env!("CARGO_MANIFEST_DIR"))
             .parent()

@@ -199,7 +199,10 @@ pub(crate) fn check_command_round_trip(src: &mut impl Source) {
     if cmd.control_mode <= 0xFF {
         assert!(matches!(r, Ok(d) if same_command(&d, &cmd)));
     } else {
-        assert_eq!(r, Err(RejectReason::Decode));
+        assert!(
+            r == Err(RejectReason::Decode),
+            "P-21: a command with an out-of-range mode is refused as Decode"
+        );
     }
     cover!(src, cmd.left_speed_cmd.is_nan(), "NaN speed round-trips");
     cover!(src, cmd.request == REQUEST_IDENTITY, "identity requested");
@@ -216,7 +219,10 @@ pub(crate) fn check_feedback_round_trip(src: &mut impl Source) {
     if fb.fault_flags <= 0xFFFF && fb.mode <= 0xFF {
         assert!(matches!(r, Ok(d) if same_feedback(&d, &fb)));
     } else {
-        assert_eq!(r, Err(RejectReason::Decode));
+        assert!(
+            r == Err(RejectReason::Decode),
+            "P-21: feedback with an out-of-range mode is refused as Decode"
+        );
     }
     cover!(src, fb.left_encoder < 0, "negative encoder count");
     cover!(
@@ -234,13 +240,28 @@ pub(crate) fn check_info_round_trip(src: &mut impl Source) {
     let info = any_info(src);
     let mut f = [0u8; FRAME_LEN];
     encode_info(&info, &mut f);
-    assert_eq!(decode_info(&f), Ok(info));
-    assert_eq!(decode_mcu_frame(&f), Ok(McuFrame::Info(info)));
-    assert_eq!(decode_feedback(&f), Err(RejectReason::Version));
-    assert_eq!(decode_command(&f), Err(RejectReason::Version));
+    assert!(
+        decode_info(&f) == Ok(info),
+        "P-21: an identity frame decodes to the identity sent"
+    );
+    assert!(
+        decode_mcu_frame(&f) == Ok(McuFrame::Info(info)),
+        "P-21: an identity frame decodes as McuFrame::Info of the identity sent"
+    );
+    assert!(
+        decode_feedback(&f) == Err(RejectReason::Version),
+        "P-21: the feedback decoder refuses an identity frame as Version"
+    );
+    assert!(
+        decode_command(&f) == Err(RejectReason::Version),
+        "P-21: the command decoder refuses an identity frame as Version"
+    );
     let mut g = [0u8; FRAME_LEN];
     encode_feedback(&any_feedback(src), &mut g);
-    assert_eq!(decode_info(&g), Err(RejectReason::Version));
+    assert!(
+        decode_info(&g) == Err(RejectReason::Version),
+        "P-21: the identity decoder refuses a feedback frame as Version"
+    );
     cover!(src, usize::from(f[0]) == MAX_INFO_LEN, "longest info");
     cover!(
         src,
@@ -307,7 +328,10 @@ pub(crate) fn check_open_total(src: &mut impl Source) {
     match r {
         Ok(p) => {
             assert!(crc_good);
-            assert_eq!(p.len(), usize::from(f[LEN_OFFSET]));
+            assert!(
+                p.len() == usize::from(f[LEN_OFFSET]),
+                "P-21: an opened payload has the length byte's length"
+            );
             assert!(p.len() <= MAX_PAYLOAD);
         }
         Err(RejectReason::Crc) => assert!(!crc_good),
@@ -350,7 +374,10 @@ pub(crate) fn check_open_shape(src: &mut impl Source) {
     let r = open(&f);
     match r {
         Ok(p) => {
-            assert_eq!(p.len(), usize::from(f[LEN_OFFSET]));
+            assert!(
+                p.len() == usize::from(f[LEN_OFFSET]),
+                "P-3: an opened payload has the length byte's length"
+            );
             assert!(p.len() <= MAX_PAYLOAD);
         }
         Err(RejectReason::Crc | RejectReason::Framing) => {}
@@ -374,7 +401,10 @@ pub(crate) fn check_bit_flip_refused_by_open(src: &mut impl Source, f: &[u8; FRA
     let bit = usize::from(src.u16() % (FRAME_LEN as u16 * 8));
     let mut g = *f;
     g[bit / 8] ^= 1 << (bit % 8);
-    assert_eq!(open(&g).map(|_| ()), Err(RejectReason::Crc));
+    assert!(
+        open(&g).map(|_| ()) == Err(RejectReason::Crc),
+        "P-7: a single-bit flip of a sealed command frame is refused as Crc"
+    );
     cover!(src, bit / 8 == LEN_OFFSET, "flip in length");
     cover!(src, bit / 8 >= CRC_OFFSET, "flip in crc");
     cover!(
@@ -424,7 +454,10 @@ fn field_step<S: Source, M>(
             Some((field, applied))
         }
         Ok(None) => {
-            assert_eq!(len, 0);
+            assert!(
+                len == 0,
+                "P-3: the decode loop ends only when the payload is used up"
+            );
             None
         }
         Err(_) => {
@@ -639,8 +672,14 @@ fn field_round_trip<S: Source, M: Copy + Default>(
     let Ok(Some((read, v))) = r.next_field() else {
         panic!("a written field did not read back");
     };
-    assert_eq!(read, field);
-    assert_eq!(r.remaining(), total - n);
+    assert!(
+        read == field,
+        "P-6: the field read back is the field written"
+    );
+    assert!(
+        r.remaining() == total - n,
+        "P-6: one decode-loop step consumes exactly the field's bytes"
+    );
     let mut got = state;
     let applied = apply(&mut got, read, v);
     if in_range {
@@ -717,7 +756,10 @@ pub(crate) fn check_seal_open(src: &mut impl Source) {
     let Ok(opened) = open(&f) else {
         panic!("a sealed frame was refused");
     };
-    assert_eq!(opened.len(), len);
+    assert!(
+        opened.len() == len,
+        "P-6: a sealed frame opens to a payload of the sealed length"
+    );
     assert!(core::ptr::eq(opened.as_ptr(), f[PAYLOAD_OFFSET..].as_ptr()));
     cover!(src, len == MAX_PAYLOAD, "full payload");
     cover!(src, len == 0, "empty payload");

@@ -134,8 +134,14 @@ pub(crate) fn check_stream_total(src: &mut impl Source) {
         }
     }
     let s = dec.stats();
-    assert_eq!(s.frames, ok);
-    assert_eq!(s.message_errors, message_errors);
+    assert!(
+        s.frames == ok,
+        "P-4: the stream counts every frame it delivers"
+    );
+    assert!(
+        s.message_errors == message_errors,
+        "P-4: the stream counts every message error it reports"
+    );
     // One `Err(Crc)` reports every candidate that failed at that byte.
     assert!(crc_results <= s.crc_errors);
     cover!(
@@ -565,11 +571,17 @@ fn stream_delivers(m: &Message, buf: &[u8; MAX_FRAME_LEN], n: usize) {
     for (i, &b) in buf[..n].iter().enumerate() {
         if let Some(r) = dec.push(b) {
             // Delivered at the frame's last byte, not before.
-            assert_eq!(i + 1, n);
+            assert!(
+                i + 1 == n,
+                "P-6: a frame is delivered at its last byte, not before"
+            );
             got = Some(r);
         }
     }
-    assert_eq!(got, Some(Ok(*m)));
+    assert!(
+        got == Some(Ok(*m)),
+        "P-6: the stream delivers the message sent"
+    );
 }
 
 /// P-6: encode → `decode_frame` gives back the same message, for one message kind (under Kani one
@@ -643,7 +655,10 @@ pub(crate) fn check_bit_flip_detected_in(src: &mut impl Source, m: &Message, reg
     let r = decode_frame(&buf[..n]);
     assert!(r.is_err());
     if region == Flip::LenByte {
-        assert_eq!(r, Err(Error::Framing));
+        assert!(
+            r == Err(Error::Framing),
+            "P-7: a flip of the LEN byte is refused as Framing"
+        );
         cover!(src, buf[LEN_INDEX] > 4, "LEN made longer");
     } else {
         cover!(src, byte < 2, "flip in SOF");

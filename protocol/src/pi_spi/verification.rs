@@ -135,7 +135,10 @@ pub(crate) fn check_updates_bit_flip_detected(src: &mut impl Source) {
     encode_rx(&rx, &mut b);
     let bit = usize::from(src.below(32));
     b[1 + bit / 8] ^= 1 << (bit % 8);
-    assert_eq!(decode_rx(&b), Err(RejectReason::Parity));
+    assert!(
+        decode_rx(&b) == Err(RejectReason::Parity),
+        "P-7: a flip in the updates word is refused as Parity"
+    );
     cover!(src, bit == 7, "flip of the parity bit");
     cover!(src, bit < 7, "flip of an update flag");
     cover!(src, bit > 7, "flip of a reserved bit");

@@ -70,11 +70,23 @@ pub(crate) fn check_round_trip(src: &mut impl Source) {
     let m = any_msg(src);
     let mut buf = [0u8; ROBUST_BUF];
     let n = m.encode_legacy(&mut buf);
-    assert_eq!(n, Some(Msg::LEGACY_LEN));
-    assert_eq!(Msg::decode_legacy(&buf[..Msg::LEGACY_LEN]), Ok(m));
+    assert!(
+        n == Some(Msg::LEGACY_LEN),
+        "P-21: the legacy packet has the legacy length"
+    );
+    assert!(
+        Msg::decode_legacy(&buf[..Msg::LEGACY_LEN]) == Ok(m),
+        "P-21: the legacy packet decodes to the message sent"
+    );
     let n = m.encode_robust(&mut buf).unwrap_or(0);
-    assert_eq!(n, Msg::ROBUST_LEN);
-    assert_eq!(Msg::decode_robust(&buf[..n]), Ok(m));
+    assert!(
+        n == Msg::ROBUST_LEN,
+        "P-21: the robust frame has the robust length"
+    );
+    assert!(
+        Msg::decode_robust(&buf[..n]) == Ok(m),
+        "P-21: the robust frame decodes to the message sent"
+    );
     let mut dec = RobustDecoder::<N>::new();
     let mut got = None;
     for &b in &buf[..n] {
@@ -82,7 +94,10 @@ pub(crate) fn check_round_trip(src: &mut impl Source) {
             got = Some(r);
         }
     }
-    assert_eq!(got, Some(Ok(m)));
+    assert!(
+        got == Some(Ok(m)),
+        "P-21: the stream decoder delivers the message sent"
+    );
     cover!(src, m.cmd_type == CmdType::Mtrs, "motor command");
 }
 
@@ -93,8 +108,14 @@ pub(crate) fn check_round_trip(src: &mut impl Source) {
 pub(crate) fn check_body_round_trip(src: &mut impl Source) {
     let m = any_msg(src);
     let mut body = [0u8; ROBUST_BODY_BUF];
-    assert_eq!(m.encode_body(&mut body), Some(BODY));
-    assert_eq!(Msg::decode_body(&body[..BODY]), Ok(m));
+    assert!(
+        m.encode_body(&mut body) == Some(BODY),
+        "P-6: the robust body has the body length"
+    );
+    assert!(
+        Msg::decode_body(&body[..BODY]) == Ok(m),
+        "P-6: the robust body decodes to the message sent"
+    );
     cover!(
         src,
         body[BODY - 2..BODY] != [0, 0],
@@ -110,7 +131,10 @@ pub(crate) fn check_stream_delivers_frame(src: &mut impl Source) {
         // A valid frame (the twin would not draw one at random).
         let mut body = [0u8; ROBUST_BODY_BUF];
         let _ = any_msg(src).encode_body(&mut body);
-        assert_eq!(stuff_into(&body[..BODY], &mut frame), FRAME);
+        assert!(
+            stuff_into(&body[..BODY], &mut frame) == FRAME,
+            "P-21: a stuffed body fills exactly one frame"
+        );
     }
     for b in frame.iter_mut().take(FRAME - 1) {
         if *b == 0 {
@@ -396,7 +420,10 @@ pub(crate) fn stuff_into(body: &[u8], out: &mut [u8]) -> usize {
 /// [`stuff_into`] for a body of the harnesses' motor count.
 fn stuff(body: &[u8; BODY]) -> [u8; FRAME] {
     let mut frame = [0u8; FRAME];
-    assert_eq!(stuff_into(body, &mut frame), FRAME);
+    assert!(
+        stuff_into(body, &mut frame) == FRAME,
+        "P-6: a stuffed body fills exactly one frame"
+    );
     frame
 }
 
@@ -421,11 +448,17 @@ pub(crate) fn check_unstuff_inverts_stuff(src: &mut impl Source) {
     }
     let frame = stuff(&body);
     let mut out = [0u8; BODY];
-    assert_eq!(unstuff(&frame, &mut out), Some(BODY));
+    assert!(
+        unstuff(&frame, &mut out) == Some(BODY),
+        "P-6: unstuffing a stuffed body gives a body of the body length"
+    );
     assert!(out == body);
     if !cfg!(kani) {
         let mut reference = [0u8; FRAME];
-        assert_eq!(corncobs::encode_buf(&body, &mut reference), FRAME);
+        assert!(
+            corncobs::encode_buf(&body, &mut reference) == FRAME,
+            "P-6: corncobs' encoder writes a frame of the frame length"
+        );
         assert!(reference == frame);
     }
     cover!(src, body.iter().all(|&b| b != 0), "no zero in the body");
@@ -457,7 +490,10 @@ pub(crate) fn check_unstuff_total(src: &mut impl Source) {
     let mut out = [0u8; BODY];
     let r = unstuff(frame, &mut out);
     if let Some(len) = r {
-        assert_eq!(len + 2, n);
+        assert!(
+            len + 2 == n,
+            "P-4: an accepted frame of n bytes decodes to n - 2 bytes"
+        );
         if n == FRAME {
             assert!(stuff(&out)[..] == *frame);
         }
@@ -471,7 +507,10 @@ pub(crate) fn check_unstuff_total(src: &mut impl Source) {
             Ok(len) if one_zero && len + 2 == n => Some(len),
             _ => None,
         };
-        assert_eq!(accepted, r);
+        assert!(
+            accepted == r,
+            "P-4: unstuff accepts exactly the frames corncobs' decoder accepts"
+        );
         if let Some(len) = r {
             assert!(reference[..len] == out[..len]);
         }
@@ -493,7 +532,10 @@ pub(crate) fn check_unstuff_total(src: &mut impl Source) {
 pub(crate) fn check_legacy_round_trip(src: &mut impl Source) {
     let m = any_msg(src);
     let mut buf = [0u8; Msg::LEGACY_LEN];
-    assert_eq!(m.encode_legacy(&mut buf), Some(Msg::LEGACY_LEN));
+    assert!(
+        m.encode_legacy(&mut buf) == Some(Msg::LEGACY_LEN),
+        "P-6: the legacy packet has the legacy length"
+    );
     assert!(Msg::decode_legacy(&buf) == Ok(m));
     cover!(src, m.cmd_type == CmdType::Mtrs, "motor command");
 }
