@@ -48,8 +48,14 @@ pub fn pid_bounded(src: &mut impl Source) {
     let mut pid = Pid::from_parts(g, integ, prev);
     let (r, y) = (q(src), q(src));
     let u = pid.step(r, y);
-    assert!(within(u, g.out_limit));
-    assert!(pid.is_valid());
+    assert!(
+        within(u, g.out_limit),
+        "P-8: the PID output stays within its limit"
+    );
+    assert!(
+        pid.is_valid(),
+        "P-8: the PID state stays valid (integrator within its limit)"
+    );
     cover!(
         src,
         u == g.out_limit && u > Q::ZERO,
@@ -84,9 +90,18 @@ pub fn current_pi_bounded(src: &mut impl Source) {
     let d1 = pi.step(r, y);
     let d2 = pi.step(q(src), q(src));
     let lim = pi.inner().gains().out_limit;
-    assert!(lim <= Q::ONE);
-    assert!(within(d1, lim) && within(d2, lim));
-    assert!(pi.inner().is_valid());
+    assert!(
+        lim <= Q::ONE,
+        "P-9: the current PI's duty limit is at most 1"
+    );
+    assert!(
+        within(d1, lim) && within(d2, lim),
+        "P-9: both duties stay within the limit"
+    );
+    assert!(
+        pi.inner().is_valid(),
+        "P-9: the current PI's state stays valid"
+    );
     cover!(src, d2 == Q::ONE, "full positive duty");
     cover!(src, d2 > Q::ZERO && d2 < lim, "unsaturated duty");
 }
@@ -100,13 +115,19 @@ pub fn rate_limiter_bounded(src: &mut impl Source) {
     let next = r.step(target);
     let d = i64::from(next.to_bits()).wrapping_sub(i64::from(start.to_bits()));
     let lim = i64::from(r.max_step().to_bits());
-    assert!(d <= lim && d >= lim.wrapping_neg());
+    assert!(
+        d <= lim && d >= lim.wrapping_neg(),
+        "P-10: the limiter moves by at most its step"
+    );
     let (lo, hi) = if start <= target {
         (start, target)
     } else {
         (target, start)
     };
-    assert!(next >= lo && next <= hi);
+    assert!(
+        next >= lo && next <= hi,
+        "P-10: the limiter never passes the target"
+    );
     let gap = i64::from(target.to_bits()).wrapping_sub(i64::from(start.to_bits()));
     if gap.unsigned_abs() <= lim.unsigned_abs() {
         assert!(
@@ -193,7 +214,10 @@ pub fn geometry_checked(src: &mut impl Source) {
     let k = DiffDrive::new(base, radius);
     match k {
         Ok(k) => {
-            assert!(radius_ok && base_ok);
+            assert!(
+                radius_ok && base_ok,
+                "P-12: only a geometry within the ranges is accepted"
+            );
             assert!(
                 k.wheelbase() == base,
                 "P-12: an accepted geometry keeps its wheelbase"
@@ -203,11 +227,17 @@ pub fn geometry_checked(src: &mut impl Source) {
                 "P-12: an accepted geometry keeps its wheel radius"
             );
         }
-        Err(KinematicsError::WheelRadius) => assert!(!radius_ok),
-        Err(KinematicsError::Wheelbase) => assert!(radius_ok && !base_ok),
+        Err(KinematicsError::WheelRadius) => assert!(
+            !radius_ok,
+            "P-12: a wheel radius refused only outside its range"
+        ),
+        Err(KinematicsError::Wheelbase) => assert!(
+            radius_ok && !base_ok,
+            "P-12: a wheelbase refused only outside its range, after a good radius"
+        ),
     }
     if radius_ok && base_ok {
-        assert!(k.is_ok());
+        assert!(k.is_ok(), "P-12: a geometry within the ranges is accepted");
     }
     cover!(src, k.is_ok(), "geometry accepted");
     cover!(
@@ -227,8 +257,11 @@ pub fn bridge_compare_safe(src: &mut impl Source) {
     let duty = q(src);
     let arr = src.u16();
     let c = bridge_compare(duty, arr);
-    assert!(c.a <= arr && c.b <= arr);
-    assert!(c.a == 0 || c.b == 0);
+    assert!(
+        c.a <= arr && c.b <= arr,
+        "P-11: both compares stay within ARR"
+    );
+    assert!(c.a == 0 || c.b == 0, "P-11: never both high sides on");
     if duty > Q::ZERO {
         assert!(
             c.b == 0,
@@ -256,7 +289,10 @@ pub fn adc_scaling_bounded(src: &mut impl Source) {
     );
     let i = adc_to_amps(counts, offset, gain);
     let bound = gain.unsigned_abs().saturating_mul_int(4095);
-    assert!(i.unsigned_abs() <= bound);
+    assert!(
+        i.unsigned_abs() <= bound,
+        "P-12: the scaled ADC current stays within its bound"
+    );
     cover!(src, i > Q::ZERO, "positive current");
     cover!(src, i < Q::ZERO, "negative current");
 }
@@ -267,7 +303,10 @@ pub fn speed_estimator_total(src: &mut impl Source) {
     let mut e = SpeedEstimator::new(src.u16(), scale);
     for _ in 0..3 {
         let s = e.update(src.u16());
-        assert!(s.unsigned_abs() <= scale.unsigned_abs().saturating_mul_int(32_768));
+        assert!(
+            s.unsigned_abs() <= scale.unsigned_abs().saturating_mul_int(32_768),
+            "P-12: the estimated speed stays within its bound"
+        );
     }
     cover!(src, e.total() != 0, "wheel moved");
 }

@@ -28,8 +28,10 @@
 //!   listed on REPORT.md's line starting `Not in this run:` (harnesses added after the run, which
 //!   then count as not verified).
 //! - **Static messages.** In the verification files, outside `#[cfg(test)]` modules (which Kani never
-//!   compiles), no `assert_eq!`, `assert_ne!`, `debug_assert*`, and no assertion whose message is
-//!   formatted at run time: Kani reports those as a placeholder instead of the property.
+//!   compiles), no `assert_eq!`, `assert_ne!`, `debug_assert*`, no assertion whose message is
+//!   formatted at run time (Kani reports those as a placeholder instead of the property), and no
+//!   assertion without a message (Kani reports only its condition). `const` assertions are the
+//!   compiler's.
 
 use std::collections::{BTreeMap, BTreeSet};
 use std::path::Path;
@@ -783,6 +785,9 @@ fn bad_assertion(stmt: &str) -> Option<&'static str> {
     let is_assert = words(&code)
         .iter()
         .any(|(_, w)| matches!(*w, "assert" | "check"));
+    if is_assert && !stmt.contains('"') {
+        return Some("an assertion without a message (Kani reports only its condition)");
+    }
     if is_assert {
         // a string literal with a `{` in an assertion is a runtime-formatted message
         let mut in_str = false;
@@ -833,15 +838,17 @@ fn assertion_problems(text: &str) -> Vec<(usize, &'static str)> {
             continue;
         }
         let c = lines.get(i).map_or("", String::as_str);
-        let starts_assert = [
-            "assert_eq!",
-            "assert_ne!",
-            "debug_assert",
-            "assert!(",
-            "check!(",
-        ]
-        .iter()
-        .any(|k| c.contains(k));
+        // a `const` assertion is checked by the compiler, not by Kani
+        let starts_assert = !c.trim_start().starts_with("const ")
+            && [
+                "assert_eq!",
+                "assert_ne!",
+                "debug_assert",
+                "assert!(",
+                "check!(",
+            ]
+            .iter()
+            .any(|k| c.contains(k));
         if starts_assert {
             // the statement runs to the line where its brackets close
             let end = block_end(&lines, i);
@@ -1480,7 +1487,7 @@ Not in this run: `verify_round_trip_ping`, `verify_round_trip_ack`.
     fn runtime_formatted_assertions_are_reported_outside_test_modules() {
         let code = CODE.replace(
             "    assert!(x < 200, \"P-1: the thing stays bounded\");",
-            "    assert_eq!(x, 1);\n    assert!(\n        x < 200,\n        \"P-1: {x} too large\"\n    );\n    debug_assert!(x > 0);",
+            "    assert_eq!(x, 1);\n    assert!(\n        x < 200,\n        \"P-1: {x} too large\"\n    );\n    debug_assert!(x > 0);\n    assert!(x > 1);\n    const _: () = assert!(1 > 0);",
         );
         let got = problems(SAFETY, REPORT, &code, PER_KIND);
         expect(
@@ -1495,8 +1502,12 @@ Not in this run: `verify_round_trip_ping`, `verify_round_trip_ack`.
             &got,
             "control/src/verification.rs:11: `debug_assert*` (not a property check)",
         );
-        // the `assert_eq!` of the `#[cfg(test)]` module is not reported
-        assert_eq!(got.len(), 3, "{got:#?}");
+        expect(
+            &got,
+            "control/src/verification.rs:12: an assertion without a message (Kani reports only its condition)",
+        );
+        // neither the `const` assertion nor the `assert_eq!` of the `#[cfg(test)]` module
+        assert_eq!(got.len(), 4, "{got:#?}");
     }
 
     #[test]

@@ -137,14 +137,17 @@ fn decode_total<S: Source, M>(
 ) {
     let f = shaped_frame(src, encode_valid);
     let r = decode(&f).map(|_| ());
-    assert!(matches!(
-        r,
-        Ok(())
-            | Err(RejectReason::Crc
-                | RejectReason::Framing
-                | RejectReason::Decode
-                | RejectReason::Version)
-    ));
+    assert!(
+        matches!(
+            r,
+            Ok(())
+                | Err(RejectReason::Crc
+                    | RejectReason::Framing
+                    | RejectReason::Decode
+                    | RejectReason::Version)
+        ),
+        "P-21: the decoder returns a message or one of its typed errors"
+    );
     cover!(src, r.is_ok(), "decoded");
     cover!(src, r == Err(RejectReason::Crc), "crc error");
     cover!(src, r == Err(RejectReason::Framing), "framing error");
@@ -197,7 +200,10 @@ pub(crate) fn check_command_round_trip(src: &mut impl Source) {
     encode_command(&cmd, &mut f);
     let r = decode_command(&f);
     if cmd.control_mode <= 0xFF {
-        assert!(matches!(r, Ok(d) if same_command(&d, &cmd)));
+        assert!(
+            matches!(r, Ok(d) if same_command(&d, &cmd)),
+            "P-21: a command with an in-range mode decodes to itself"
+        );
     } else {
         assert!(
             r == Err(RejectReason::Decode),
@@ -217,7 +223,10 @@ pub(crate) fn check_feedback_round_trip(src: &mut impl Source) {
     encode_feedback(&fb, &mut f);
     let r = decode_feedback(&f);
     if fb.fault_flags <= 0xFFFF && fb.mode <= 0xFF {
-        assert!(matches!(r, Ok(d) if same_feedback(&d, &fb)));
+        assert!(
+            matches!(r, Ok(d) if same_feedback(&d, &fb)),
+            "P-21: feedback with an in-range mode decodes to itself"
+        );
     } else {
         assert!(
             r == Err(RejectReason::Decode),
@@ -279,7 +288,10 @@ pub(crate) fn check_command_bit_flip_detected(src: &mut impl Source) {
     encode_command(&cmd, &mut f);
     let bit = usize::from(src.u16() % (FRAME_LEN as u16 * 8));
     f[bit / 8] ^= 1 << (bit % 8);
-    assert!(decode_command(&f).is_err());
+    assert!(
+        decode_command(&f).is_err(),
+        "P-21: a command frame with one bit flipped is refused"
+    );
     let byte = bit / 8;
     let len = usize::from(f[0]);
     cover!(src, byte == LEN_OFFSET, "flip in length");
@@ -303,7 +315,10 @@ pub(crate) fn check_feedback_bit_flip_detected(src: &mut impl Source) {
     encode_feedback(&fb, &mut f);
     let bit = usize::from(src.u16() % (FRAME_LEN as u16 * 8));
     f[bit / 8] ^= 1 << (bit % 8);
-    assert!(decode_feedback(&f).is_err());
+    assert!(
+        decode_feedback(&f).is_err(),
+        "P-21: a feedback frame with one bit flipped is refused"
+    );
     cover!(src, bit / 8 >= CRC_OFFSET, "flip in crc");
     cover!(src, bit / 8 < CRC_OFFSET, "flip before crc");
 }
@@ -327,15 +342,20 @@ pub(crate) fn check_open_total(src: &mut impl Source) {
     let r = open(&f);
     match r {
         Ok(p) => {
-            assert!(crc_good);
+            assert!(crc_good, "P-21: a frame opens only with a matching CRC");
             assert!(
                 p.len() == usize::from(f[LEN_OFFSET]),
                 "P-21: an opened payload has the length byte's length"
             );
-            assert!(p.len() <= MAX_PAYLOAD);
+            assert!(
+                p.len() <= MAX_PAYLOAD,
+                "P-21: an opened payload fits the frame"
+            );
         }
-        Err(RejectReason::Crc) => assert!(!crc_good),
-        Err(RejectReason::Framing) => assert!(crc_good),
+        Err(RejectReason::Crc) => assert!(!crc_good, "P-21: a Crc refusal only for a wrong CRC"),
+        Err(RejectReason::Framing) => {
+            assert!(crc_good, "P-21: a Framing refusal only with a good CRC")
+        }
         Err(_) => panic!("open refused for a reason it does not check"),
     }
     cover!(src, r.is_ok(), "frame opened");
@@ -378,7 +398,10 @@ pub(crate) fn check_open_shape(src: &mut impl Source) {
                 p.len() == usize::from(f[LEN_OFFSET]),
                 "P-3: an opened payload has the length byte's length"
             );
-            assert!(p.len() <= MAX_PAYLOAD);
+            assert!(
+                p.len() <= MAX_PAYLOAD,
+                "P-3: an opened payload fits the frame"
+            );
         }
         Err(RejectReason::Crc | RejectReason::Framing) => {}
         Err(_) => panic!("open refused for a reason it does not check"),
@@ -448,7 +471,10 @@ fn field_step<S: Source, M>(
     let mut r = Reader::new(&buf[..len]);
     match r.next_field() {
         Ok(Some((field, v))) => {
-            assert!(r.remaining() + 2 <= len);
+            assert!(
+                r.remaining() + 2 <= len,
+                "P-3: each decode-loop step consumes at least 2 bytes"
+            );
             let applied = apply(&mut msg, field, v);
             cover!(src, applied.is_err(), "field refused");
             Some((field, applied))
@@ -660,10 +686,16 @@ fn field_round_trip<S: Source, M: Copy + Default>(
         write(&mut w, m, field);
         w.len()
     };
-    assert!(n <= max(field));
+    assert!(
+        n <= max(field),
+        "P-6: a field takes at most its bound's bytes"
+    );
     if n == 0 {
         // Omitted: the decoded message keeps the default, which is `m`'s value.
-        assert!(same(&with(default, m, field), &default));
+        assert!(
+            same(&with(default, m, field), &default),
+            "P-6: only a default value is omitted"
+        );
         return (n, Ok(()));
     }
     // The payload ends anywhere after the field.
@@ -683,10 +715,13 @@ fn field_round_trip<S: Source, M: Copy + Default>(
     let mut got = state;
     let applied = apply(&mut got, read, v);
     if in_range {
-        assert!(applied.is_ok());
-        assert!(same(&got, &with(state, m, field)));
+        assert!(applied.is_ok(), "P-6: an in-range field is applied");
+        assert!(
+            same(&got, &with(state, m, field)),
+            "P-6: the field read back sets exactly that member"
+        );
     } else {
-        assert!(applied.is_err());
+        assert!(applied.is_err(), "P-6: an out-of-range field is refused");
     }
     (n, applied)
 }
@@ -736,7 +771,10 @@ pub(crate) fn check_info_field_round_trip(src: &mut impl Source) {
     let field = f::ALL[usize::from(src.below(f::ALL.len() as u8))];
     let state = (any_info(src), src.u32());
     let (n, applied) = field_round_trip(src, &INFO_FIELDS, &info, field, state, true);
-    assert!(applied.is_ok());
+    assert!(
+        applied.is_ok(),
+        "P-6: every identity field read back is applied"
+    );
     cover!(src, n == 0, "default value omitted");
     cover!(src, n == 7, "longest field");
     cover!(
@@ -760,7 +798,10 @@ pub(crate) fn check_seal_open(src: &mut impl Source) {
         opened.len() == len,
         "P-6: a sealed frame opens to a payload of the sealed length"
     );
-    assert!(core::ptr::eq(opened.as_ptr(), f[PAYLOAD_OFFSET..].as_ptr()));
+    assert!(
+        core::ptr::eq(opened.as_ptr(), f[PAYLOAD_OFFSET..].as_ptr()),
+        "P-6: the payload is opened in place"
+    );
     cover!(src, len == MAX_PAYLOAD, "full payload");
     cover!(src, len == 0, "empty payload");
 }

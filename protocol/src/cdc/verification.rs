@@ -124,7 +124,10 @@ pub(crate) fn check_stream_total(src: &mut impl Source) {
         fed += n;
         for &b in &chunk[..n] {
             let r = dec.push(b);
-            assert!(dec.buffered() <= MAX_FRAME_LEN);
+            assert!(
+                dec.buffered() <= MAX_FRAME_LEN,
+                "P-4: the stream decoder holds at most one frame"
+            );
             match r {
                 Some(Ok(_)) => ok += 1,
                 Some(Err(Error::Crc)) => crc_results += 1,
@@ -143,7 +146,10 @@ pub(crate) fn check_stream_total(src: &mut impl Source) {
         "P-4: the stream counts every message error it reports"
     );
     // One `Err(Crc)` reports every candidate that failed at that byte.
-    assert!(crc_results <= s.crc_errors);
+    assert!(
+        crc_results <= s.crc_errors,
+        "P-4: every CRC error reported is counted"
+    );
     cover!(
         src,
         ok > 0 && s.dropped_bytes > 0,
@@ -594,8 +600,14 @@ pub(crate) fn check_frame_round_trip_of(
     let m = any_message_of(src, kind);
     let mut buf = [0u8; MAX_FRAME_LEN];
     let n = m.encode(&mut buf);
-    assert!(n == HEADER_LEN + m.id().payload_len() + CRC_LEN);
-    assert!(decode_frame(&buf[..n]) == Ok(m));
+    assert!(
+        n == HEADER_LEN + m.id().payload_len() + CRC_LEN,
+        "P-6: a frame has its kind's length"
+    );
+    assert!(
+        decode_frame(&buf[..n]) == Ok(m),
+        "P-6: a frame decodes to the message sent"
+    );
     cover!(src, buf[n - 2..n] != [0, 0], "frame with a non-zero CRC");
     (m, buf, n)
 }
@@ -653,7 +665,7 @@ pub(crate) fn check_bit_flip_detected_in(src: &mut impl Source, m: &Message, reg
         }
     }
     let r = decode_frame(&buf[..n]);
-    assert!(r.is_err());
+    assert!(r.is_err(), "P-7: a frame with one bit flipped is refused");
     if region == Flip::LenByte {
         assert!(
             r == Err(Error::Framing),

@@ -97,7 +97,10 @@ pub(crate) fn check_bursts_detected(src: &mut impl Source, order: Order, n: usiz
     assume!(src, burst.is_some());
     let Some(e) = burst else { return };
     let zeros = [0u8; MAX_COVERED];
-    assert!(syndrome(&e, n, order, checksum(&zeros[..n])) != 0);
+    assert!(
+        syndrome(&e, n, order, checksum(&zeros[..n])) != 0,
+        "P-1: the burst changes the CRC check (non-zero syndrome)"
+    );
     let body_hit = e[..n].iter().any(|&b| b != 0);
     let crc_hit = e[n] != 0 || e[n + 1] != 0;
     let wrong_bits: u32 = e.iter().map(|b| b.count_ones()).sum();

@@ -74,16 +74,22 @@ pub(crate) fn check_decode_total(src: &mut impl Source) {
         rx[i] = src.u8();
     }
     let r = decode_rx(&rx);
-    assert!(matches!(
-        r,
-        Ok(_) | Err(RejectReason::Version | RejectReason::Parity | RejectReason::Decode)
-    ));
+    assert!(
+        matches!(
+            r,
+            Ok(_) | Err(RejectReason::Version | RejectReason::Parity | RejectReason::Decode)
+        ),
+        "P-4: decode_rx returns a buffer or one of its typed errors"
+    );
     let mut tx = [0u8; TX_LEN];
     for b in tx.iter_mut() {
         *b = src.u8();
     }
     let t = decode_tx(&tx);
-    assert!(matches!(t, Ok(_) | Err(RejectReason::Version)));
+    assert!(
+        matches!(t, Ok(_) | Err(RejectReason::Version)),
+        "P-4: decode_tx returns a buffer or Version"
+    );
     cover!(src, r.is_ok(), "rx decoded");
     cover!(src, r == Err(RejectReason::Version), "rx version error");
     cover!(src, r == Err(RejectReason::Parity), "rx parity error");
@@ -102,8 +108,14 @@ pub(crate) fn check_round_trip(src: &mut impl Source) {
         Ok(d) => encode_rx(&d, &mut again),
         Err(_) => panic!("valid rx refused"),
     }
-    assert!(b == again);
-    assert!(parity_ok(u32::from_le_bytes([b[1], b[2], b[3], b[4]])));
+    assert!(
+        b == again,
+        "P-6: the received buffer re-encodes to the same bytes"
+    );
+    assert!(
+        parity_ok(u32::from_le_bytes([b[1], b[2], b[3], b[4]])),
+        "P-6: an encoded buffer has a good parity"
+    );
     let mut tx = TxBuffer {
         update_time: src.u32(),
         ..Default::default()
@@ -119,7 +131,7 @@ pub(crate) fn check_round_trip(src: &mut impl Source) {
         Ok(d) => encode_tx(&d, &mut t2),
         Err(_) => panic!("valid tx refused"),
     }
-    assert!(t == t2);
+    assert!(t == t2, "P-6: the transmitted buffer decodes to itself");
     cover!(
         src,
         rx.updates.0.count_ones().is_multiple_of(2),

@@ -144,10 +144,16 @@ pub(crate) fn check_stream_delivers_frame(src: &mut impl Source) {
     frame[FRAME - 1] = 0;
     let mut dec = RobustDecoder::<N>::new();
     for &b in &frame[..FRAME - 1] {
-        assert!(dec.push(b).is_none());
+        assert!(
+            dec.push(b).is_none(),
+            "P-21: nothing is delivered before the terminator"
+        );
     }
     let got = dec.push(0);
-    assert!(got == Some(Msg::decode_robust(&frame)));
+    assert!(
+        got == Some(Msg::decode_robust(&frame)),
+        "P-21: the stream answers as decode_robust of the frame"
+    );
     cover!(src, got.is_some_and(|r| r.is_ok()), "command delivered");
     cover!(
         src,
@@ -163,7 +169,10 @@ pub(crate) fn check_bit_flip_detected(src: &mut impl Source) {
     let n = m.encode_robust(&mut buf).unwrap_or(0);
     let bit = usize::from(src.u16()) % (n * 8).max(1);
     buf[bit / 8] ^= 1 << (bit % 8);
-    assert!(Msg::decode_robust(&buf[..n]).is_err());
+    assert!(
+        Msg::decode_robust(&buf[..n]).is_err(),
+        "P-21: a robust frame with one bit flipped is refused"
+    );
     cover!(src, bit / 8 == n - 1, "flip in terminator");
     cover!(src, bit / 8 < n - 1, "flip in body");
 }
@@ -182,10 +191,10 @@ pub(crate) fn check_legacy_total(src: &mut impl Source) {
         }
     }
     let r = Msg::decode_legacy(&buf[..n]);
-    assert!(matches!(
-        r,
-        Ok(_) | Err(RejectReason::Framing | RejectReason::Decode)
-    ));
+    assert!(
+        matches!(r, Ok(_) | Err(RejectReason::Framing | RejectReason::Decode)),
+        "P-4: decode_legacy returns a message or one of its typed errors"
+    );
     cover!(src, r.is_ok(), "legacy decoded");
     cover!(src, r == Err(RejectReason::Decode), "unknown cmd_type");
     cover!(
@@ -211,14 +220,17 @@ pub(crate) fn check_robust_total(src: &mut impl Source) {
         }
     }
     let r = Msg::decode_robust(&buf[..n]);
-    assert!(matches!(
-        r,
-        Ok(_)
-            | Err(RejectReason::Framing
-                | RejectReason::Crc
-                | RejectReason::Version
-                | RejectReason::Decode)
-    ));
+    assert!(
+        matches!(
+            r,
+            Ok(_)
+                | Err(RejectReason::Framing
+                    | RejectReason::Crc
+                    | RejectReason::Version
+                    | RejectReason::Decode)
+        ),
+        "P-4: decode_robust returns a message or one of its typed errors"
+    );
     cover!(src, r.is_ok(), "robust decoded");
     cover!(src, r == Err(RejectReason::Crc), "robust crc error");
     cover!(src, r == Err(RejectReason::Framing), "robust framing error");
@@ -452,14 +464,17 @@ pub(crate) fn check_unstuff_inverts_stuff(src: &mut impl Source) {
         unstuff(&frame, &mut out) == Some(BODY),
         "P-6: unstuffing a stuffed body gives a body of the body length"
     );
-    assert!(out == body);
+    assert!(out == body, "P-6: unstuff gives back the body stuffed");
     if !cfg!(kani) {
         let mut reference = [0u8; FRAME];
         assert!(
             corncobs::encode_buf(&body, &mut reference) == FRAME,
             "P-6: corncobs' encoder writes a frame of the frame length"
         );
-        assert!(reference == frame);
+        assert!(
+            reference == frame,
+            "P-6: corncobs' encoder writes the specification's frame"
+        );
     }
     cover!(src, body.iter().all(|&b| b != 0), "no zero in the body");
     cover!(
@@ -495,7 +510,10 @@ pub(crate) fn check_unstuff_total(src: &mut impl Source) {
             "P-4: an accepted frame of n bytes decodes to n - 2 bytes"
         );
         if n == FRAME {
-            assert!(stuff(&out)[..] == *frame);
+            assert!(
+                stuff(&out)[..] == *frame,
+                "P-4: unstuff accepts only frames stuff_into makes"
+            );
         }
     }
     if !cfg!(kani) {
@@ -512,7 +530,10 @@ pub(crate) fn check_unstuff_total(src: &mut impl Source) {
             "P-4: unstuff accepts exactly the frames corncobs' decoder accepts"
         );
         if let Some(len) = r {
-            assert!(reference[..len] == out[..len]);
+            assert!(
+                reference[..len] == out[..len],
+                "P-4: unstuff decodes as corncobs' decoder does"
+            );
         }
     }
     cover!(src, r.is_some(), "frame accepted");
@@ -536,7 +557,10 @@ pub(crate) fn check_legacy_round_trip(src: &mut impl Source) {
         m.encode_legacy(&mut buf) == Some(Msg::LEGACY_LEN),
         "P-6: the legacy packet has the legacy length"
     );
-    assert!(Msg::decode_legacy(&buf) == Ok(m));
+    assert!(
+        Msg::decode_legacy(&buf) == Ok(m),
+        "P-6: the legacy packet decodes to the message sent"
+    );
     cover!(src, m.cmd_type == CmdType::Mtrs, "motor command");
 }
 
