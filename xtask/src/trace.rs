@@ -294,7 +294,8 @@ fn above(raw: &[&str], at: usize) -> (String, Vec<String>) {
             if !t.starts_with("//") || in_docs {
                 break;
             }
-        } else {
+        } else if !t.starts_with("//") {
+            // plain comments between attributes are passed over, never read as attributes
             attrs.insert_str(0, t);
         }
     }
@@ -1508,6 +1509,87 @@ Not in this run: `verify_round_trip_ping`, `verify_round_trip_ack`.
         );
         // neither the `const` assertion nor the `assert_eq!` of the `#[cfg(test)]` module
         assert_eq!(got.len(), 4, "{got:#?}");
+    }
+
+    const LADDER: &str = r#"//! Ladder fixture.
+
+/// INV-7: latching faults brake in the same step.
+pub fn faults_brake<const N: usize>(src: &mut impl Source) {
+    check!(brakes::<N>(src), "INV-7: a fault brakes in the same step");
+}
+
+#[cfg(kani)]
+macro_rules! proofs {
+    ($($kind:ident $body:ident => $two:ident $(, $four:ident)?;)*) => {
+        $( proofs!(@one $kind $body $two 2); $(proofs!(@one $kind $body $four 4);)? )*
+    };
+    (@one plain $body:ident $name:ident $n:literal) => {
+        // a comment that mentions #[test] is not an attribute
+        #[kani::proof]
+        fn $name() {
+            super::$body::<$n>(&mut KaniSource);
+        }
+    };
+}
+
+#[cfg(kani)]
+mod kani_entry {
+    proofs! {
+        plain faults_brake => verify_faults_brake_2, verify_faults_brake_4;
+    }
+}
+
+#[cfg(test)]
+macro_rules! twins {
+    ($($body:ident => $seed:expr;)*) => {
+        $(
+            mod $body {
+                #[test]
+                fn two_axes() {}
+            }
+        )*
+    };
+}
+
+#[cfg(test)]
+mod twins {
+    twins! {
+        faults_brake => 1;
+    }
+}
+"#;
+
+    #[test]
+    fn a_ladder_body_names_its_entries_for_each_axis_count() {
+        let files = vec![(LADDER_FILE.to_string(), LADDER.to_string())];
+        let c = scan(&files, &BTreeSet::new());
+        let names: Vec<(&str, &str)> = c
+            .harnesses
+            .iter()
+            .map(|h| (h.name.as_str(), h.body.as_str()))
+            .collect();
+        assert_eq!(
+            names,
+            [
+                ("verify_faults_brake_2", "faults_brake"),
+                ("verify_faults_brake_4", "faults_brake")
+            ]
+        );
+        let safety = "## 4. Invariants\n\n| INV | statement | harness / twin | status |\n|---|---|---|---|\n\
+                      | INV-7 | faults brake | `faults_brake` | VERIFIED |\n\n\
+                      ## 6. Traceability\n\n| hazard | SR | INV | harnesses |\n|---|---|---|---|\n\
+                      | H-6 | SR-6 | INV-7 | `faults_brake` |\n";
+        let report = "## Fresh-clone tables\n\n| harness | result |\n|---|---|\n\
+                      | `verify_faults_brake_2` | VERIFIED |\n| `verify_faults_brake_4` | VERIFIED |\n";
+        let got = check(safety, report, &c, &files);
+        assert!(got.is_empty(), "{got:#?}");
+        // one axis count missing from the run: the claim is no longer VERIFIED
+        let report = report.replace("| `verify_faults_brake_4` | VERIFIED |\n", "");
+        let got = check(safety, &report, &c, &files);
+        expect(
+            &got,
+            "proofs/SAFETY.md: INV-7 (§4) says VERIFIED, REPORT.md's fresh-clone tables support TWIN",
+        );
     }
 
     #[test]
