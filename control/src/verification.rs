@@ -38,7 +38,7 @@ fn gains(src: &mut impl Source) -> PidGains {
     }
 }
 
-/// PID: from any valid state, one step keeps |u| ≤ out_limit and |i| ≤ i_limit.
+/// P-8: PID: from any valid state, one step keeps |u| ≤ out_limit and |i| ≤ i_limit.
 pub fn pid_bounded(src: &mut impl Source) {
     let g = gains(src);
     assume!(src, g.is_valid());
@@ -48,8 +48,14 @@ pub fn pid_bounded(src: &mut impl Source) {
     let mut pid = Pid::from_parts(g, integ, prev);
     let (r, y) = (q(src), q(src));
     let u = pid.step(r, y);
-    assert!(within(u, g.out_limit));
-    assert!(pid.is_valid());
+    assert!(
+        within(u, g.out_limit),
+        "P-8: the PID output stays within its limit"
+    );
+    assert!(
+        pid.is_valid(),
+        "P-8: the PID state stays valid (integrator within its limit)"
+    );
     cover!(
         src,
         u == g.out_limit && u > Q::ZERO,
@@ -75,7 +81,7 @@ pub fn pid_bounded(src: &mut impl Source) {
     );
 }
 
-/// Current PI: |duty| ≤ min(out_limit, 1) from any valid state.
+/// P-9: Current PI: |duty| ≤ min(out_limit, 1) from any valid state.
 pub fn current_pi_bounded(src: &mut impl Source) {
     let g = gains(src);
     assume!(src, g.is_valid());
@@ -84,14 +90,23 @@ pub fn current_pi_bounded(src: &mut impl Source) {
     let d1 = pi.step(r, y);
     let d2 = pi.step(q(src), q(src));
     let lim = pi.inner().gains().out_limit;
-    assert!(lim <= Q::ONE);
-    assert!(within(d1, lim) && within(d2, lim));
-    assert!(pi.inner().is_valid());
+    assert!(
+        lim <= Q::ONE,
+        "P-9: the current PI's duty limit is at most 1"
+    );
+    assert!(
+        within(d1, lim) && within(d2, lim),
+        "P-9: both duties stay within the limit"
+    );
+    assert!(
+        pi.inner().is_valid(),
+        "P-9: the current PI's state stays valid"
+    );
     cover!(src, d2 == Q::ONE, "full positive duty");
     cover!(src, d2 > Q::ZERO && d2 < lim, "unsaturated duty");
 }
 
-/// Rate limiter: |Δ| ≤ max_step, never past the target, exact when within one step.
+/// P-10: Rate limiter: |Δ| ≤ max_step, never past the target, exact when within one step.
 pub fn rate_limiter_bounded(src: &mut impl Source) {
     let step = q(src);
     let start = q(src);
@@ -100,16 +115,25 @@ pub fn rate_limiter_bounded(src: &mut impl Source) {
     let next = r.step(target);
     let d = i64::from(next.to_bits()).wrapping_sub(i64::from(start.to_bits()));
     let lim = i64::from(r.max_step().to_bits());
-    assert!(d <= lim && d >= lim.wrapping_neg());
+    assert!(
+        d <= lim && d >= lim.wrapping_neg(),
+        "P-10: the limiter moves by at most its step"
+    );
     let (lo, hi) = if start <= target {
         (start, target)
     } else {
         (target, start)
     };
-    assert!(next >= lo && next <= hi);
+    assert!(
+        next >= lo && next <= hi,
+        "P-10: the limiter never passes the target"
+    );
     let gap = i64::from(target.to_bits()).wrapping_sub(i64::from(start.to_bits()));
     if gap.unsigned_abs() <= lim.unsigned_abs() {
-        assert_eq!(next, target);
+        assert!(
+            next == target,
+            "P-10: within one step of the target the limiter lands on it"
+        );
     }
     cover!(src, next == target && start != target, "reached the target");
     cover!(src, next != target, "limited by the step");
@@ -130,7 +154,7 @@ const GEOMETRIES: [(Q, Q); 6] = [
     (Q::lit("0.01"), Q::const_from_int(10)),
 ];
 
-/// Kinematics conversions never panic or overflow for any twist and any wheel speeds; zero maps to
+/// P-12: Kinematics conversions never panic or overflow for any twist and any wheel speeds; zero maps to
 /// zero, a straight twist gives equal wheel speeds, equal wheel speeds give no yaw.
 pub fn kinematics_total(src: &mut impl Source) {
     for &(base, radius) in &GEOMETRIES {
@@ -148,20 +172,29 @@ pub fn kinematics_total(src: &mut impl Source) {
             v: Q::ZERO,
             omega: Q::ZERO,
         });
-        assert_eq!(zl, Q::ZERO);
-        assert_eq!(zr, Q::ZERO);
+        assert!(
+            zl == Q::ZERO,
+            "P-12: zero twist gives a zero left wheel speed"
+        );
+        assert!(
+            zr == Q::ZERO,
+            "P-12: zero twist gives a zero right wheel speed"
+        );
         let [sl, sr] = k.inverse(Twist {
             v: t.v,
             omega: Q::ZERO,
         });
-        assert_eq!(sl, sr);
-        assert_eq!(k.forward(l, l).omega, Q::ZERO);
+        assert!(sl == sr, "P-12: a straight twist gives equal wheel speeds");
+        assert!(
+            k.forward(l, l).omega == Q::ZERO,
+            "P-12: equal wheel speeds give no yaw"
+        );
         cover!(src, l != r, "turning twist");
         cover!(src, l == Q::MAX, "a wheel speed saturated");
     }
 }
 
-/// Construction of any geometry never panics, refuses a radius outside 1 mm ..= 10 m or a wheelbase
+/// P-12: Construction of any geometry never panics, refuses a radius outside 1 mm ..= 10 m or a wheelbase
 /// outside 1 cm ..= 64 m, and accepts every geometry inside both ranges.
 pub fn geometry_checked(src: &mut impl Source) {
     // Any value, or (for the twin's sake: random bits rarely land in range) one near the ranges.
@@ -181,15 +214,30 @@ pub fn geometry_checked(src: &mut impl Source) {
     let k = DiffDrive::new(base, radius);
     match k {
         Ok(k) => {
-            assert!(radius_ok && base_ok);
-            assert_eq!(k.wheelbase(), base);
-            assert_eq!(k.wheel_radius(), radius);
+            assert!(
+                radius_ok && base_ok,
+                "P-12: only a geometry within the ranges is accepted"
+            );
+            assert!(
+                k.wheelbase() == base,
+                "P-12: an accepted geometry keeps its wheelbase"
+            );
+            assert!(
+                k.wheel_radius() == radius,
+                "P-12: an accepted geometry keeps its wheel radius"
+            );
         }
-        Err(KinematicsError::WheelRadius) => assert!(!radius_ok),
-        Err(KinematicsError::Wheelbase) => assert!(radius_ok && !base_ok),
+        Err(KinematicsError::WheelRadius) => assert!(
+            !radius_ok,
+            "P-12: a wheel radius refused only outside its range"
+        ),
+        Err(KinematicsError::Wheelbase) => assert!(
+            radius_ok && !base_ok,
+            "P-12: a wheelbase refused only outside its range, after a good radius"
+        ),
     }
     if radius_ok && base_ok {
-        assert!(k.is_ok());
+        assert!(k.is_ok(), "P-12: a geometry within the ranges is accepted");
     }
     cover!(src, k.is_ok(), "geometry accepted");
     cover!(
@@ -204,24 +252,33 @@ pub fn geometry_checked(src: &mut impl Source) {
     );
 }
 
-/// Bridge mapping: both compares ≤ ARR and at most one non-zero (never both high sides on).
+/// P-11: Bridge mapping: both compares ≤ ARR and at most one non-zero (never both high sides on).
 pub fn bridge_compare_safe(src: &mut impl Source) {
     let duty = q(src);
     let arr = src.u16();
     let c = bridge_compare(duty, arr);
-    assert!(c.a <= arr && c.b <= arr);
-    assert!(c.a == 0 || c.b == 0);
+    assert!(
+        c.a <= arr && c.b <= arr,
+        "P-11: both compares stay within ARR"
+    );
+    assert!(c.a == 0 || c.b == 0, "P-11: never both high sides on");
     if duty > Q::ZERO {
-        assert_eq!(c.b, 0);
+        assert!(
+            c.b == 0,
+            "P-11: a positive duty leaves the reverse compare at zero"
+        );
     }
     if duty < Q::ZERO {
-        assert_eq!(c.a, 0);
+        assert!(
+            c.a == 0,
+            "P-11: a negative duty leaves the forward compare at zero"
+        );
     }
     cover!(src, c.a == arr && arr > 0, "full forward");
     cover!(src, c.b > 0, "reverse");
 }
 
-/// ADC scaling never panics and |i| ≤ 4095·|gain| (saturating at the Q16.16 range).
+/// P-12: ADC scaling never panics and |i| ≤ 4095·|gain| (saturating at the Q16.16 range).
 pub fn adc_scaling_bounded(src: &mut impl Source) {
     let counts = src.u16();
     let offset = src.u16();
@@ -232,18 +289,24 @@ pub fn adc_scaling_bounded(src: &mut impl Source) {
     );
     let i = adc_to_amps(counts, offset, gain);
     let bound = gain.unsigned_abs().saturating_mul_int(4095);
-    assert!(i.unsigned_abs() <= bound);
+    assert!(
+        i.unsigned_abs() <= bound,
+        "P-12: the scaled ADC current stays within its bound"
+    );
     cover!(src, i > Q::ZERO, "positive current");
     cover!(src, i < Q::ZERO, "negative current");
 }
 
-/// Speed estimator: any counter sequence, no panic, estimate = scale × window delta.
+/// P-12: Speed estimator: any counter sequence, no panic, estimate = scale × window delta.
 pub fn speed_estimator_total(src: &mut impl Source) {
     let scale = q(src);
     let mut e = SpeedEstimator::new(src.u16(), scale);
     for _ in 0..3 {
         let s = e.update(src.u16());
-        assert!(s.unsigned_abs() <= scale.unsigned_abs().saturating_mul_int(32_768));
+        assert!(
+            s.unsigned_abs() <= scale.unsigned_abs().saturating_mul_int(32_768),
+            "P-12: the estimated speed stays within its bound"
+        );
     }
     cover!(src, e.total() != 0, "wheel moved");
 }
@@ -319,7 +382,7 @@ fn profile_case(src: &mut impl Source, lim: &ProfileLimits) -> (Trapezoid, Posit
     (Trapezoid::from_parts(pos, frac, vel), target)
 }
 
-/// Profile, property 1 (and no panic or overflow for any input): from any valid state, toward any
+/// INV-20: Profile, property 1 (and no panic or overflow for any input): from any valid state, toward any
 /// target at any cap, the new position is within the travel and never passes the target clamped
 /// into it — a position at or below it stays at or below it, and symmetrically.
 pub fn profile_stays_within_travel(src: &mut impl Source) {
@@ -363,7 +426,7 @@ pub fn profile_stays_within_travel(src: &mut impl Source) {
     );
 }
 
-/// Profile, property 2: from any valid state, toward any target at any cap, |v| ≤ max(cap, 0)
+/// INV-20: Profile, property 2: from any valid state, toward any target at any cap, |v| ≤ max(cap, 0)
 /// after the step, and the velocity changes by at most `accel_step` unless
 /// - the cap forced it: then |v_new| = cap < |v_old|, same sign (the cap only ever slows the axis);
 /// - the axis stopped on the target (reaching or passing it): on it, v_new = 0;
@@ -422,7 +485,7 @@ pub fn profile_speed_within_cap(src: &mut impl Source) {
     );
 }
 
-/// Profile, nominal operation: from a valid state that can stop before the target and the travel
+/// P-20: Profile, nominal operation: from a valid state that can stop before the target and the travel
 /// limits ([`Trapezoid::can_stop`], the states the profile plans), a step toward the same target at
 /// any cap changes the velocity by at most `accel_step` unless the cap forces it (no abrupt stop on
 /// the target or a limit, arrival included), and the new state can again stop: by induction a

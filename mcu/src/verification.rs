@@ -24,7 +24,7 @@ fn amps(src: &mut impl Source) -> Q {
     Q::from_bits(src.i32())
 }
 
-/// Current loop: one run from rest with any readings, references, bridge state and break flag.
+/// P-13: Current loop: one run from rest with any readings, references, bridge state and break flag.
 pub fn current_loop_safe(src: &mut impl Source) {
     let mut c = CurrentLoop::new(&AMR, [src.u16(), src.u16()]);
     let arr = AMR.pwm_arr().unwrap_or(1);
@@ -68,7 +68,7 @@ pub fn current_loop_safe(src: &mut impl Source) {
     );
 }
 
-/// Speed loop: one run from rest with any counters and any setpoint.
+/// P-14: Speed loop: one run from rest with any counters and any setpoint.
 pub fn speed_loop_bounded(src: &mut impl Source) {
     let mut l = SpeedLoop::new(&AMR, [src.u16(), src.u16()]);
     let setpoint = if src.bool() {
@@ -90,7 +90,7 @@ pub fn speed_loop_bounded(src: &mut impl Source) {
     cover!(src, s.refs.contains(&limit), "reference saturated");
 }
 
-/// ESTOP: a press brakes the bridge in the handler, whatever its state, and is reported by the
+/// P-15: ESTOP: a press brakes the bridge in the handler, whatever its state, and is reported by the
 /// next poll even if released again before it.
 pub fn estop_press_brakes_at_once(src: &mut impl Source) {
     let mut b = RecordingBridge::new(src.u16());
@@ -114,7 +114,7 @@ pub fn estop_press_brakes_at_once(src: &mut impl Source) {
     cover!(src, pressed && was_running, "press while running");
 }
 
-/// µs clock: never panics; within one tick of the tick count (modulo the u32 wrap).
+/// P-16: µs clock: never panics; within one tick of the tick count (modulo the u32 wrap).
 pub fn micros_bounded(src: &mut impl Source) {
     let ticks = src.u32();
     let period = src.u32();
@@ -129,7 +129,7 @@ pub fn micros_bounded(src: &mut impl Source) {
     cover!(src, off >= 1000, "update pending counted");
 }
 
-/// Seed 001 board: whatever the ladder's state and whatever bytes came before it (a false
+/// P-17: Seed 001 board: whatever the ladder's state and whatever bytes came before it (a false
 /// start-of-frame, a truncated frame), an `ESTOP 1` frame latches BRAKE in the link task's step for
 /// its last byte, and is acknowledged.
 pub fn serial_estop_brakes_at_its_last_byte(src: &mut impl Source) {
@@ -337,7 +337,7 @@ pub fn pi_spi_refusal_changes_nothing(src: &mut impl Source) {
     cover!(src, raw.motors, "refused buffer with the shutdown bit");
 }
 
-/// Seed 004 board: gains received at run time either are refused whole, or every controller built
+/// INV-23: Seed 004 board: gains received at run time either are refused whole, or every controller built
 /// from them keeps the limits of its bounds (non-negative, the board's) and so stays inside the
 /// PID's proven bounds: one sample from rest, with any setpoint and measurement, returns
 /// |u| ≤ the bounds' output limit (control's `verify_pid_bounded` covers every later sample).
@@ -448,7 +448,7 @@ fn accepted_kinematics(src: &mut impl Source) -> protocol::pi_spi::assumed::Kine
     k
 }
 
-/// Odometry, update flag `KINEMATICS`: a configuration is accepted only if every number is finite,
+/// P-19: Odometry, update flag `KINEMATICS`: a configuration is accepted only if every number is finite,
 /// every `ticks_to_rad` and every `inverse` entry is within its documented bound and the matrix is
 /// not all zero; accepted, it is in force and the pose is kept; refused, the configuration in force
 /// and the outputs stay and only the refusal counter moves. From an unconfigured odometry or one
@@ -565,7 +565,7 @@ pub fn odometry_configure_guarded(src: &mut impl Source) {
     );
 }
 
-/// Odometry: for any accepted configuration, any counts (wrapping), any period and resets between
+/// P-19: Odometry: for any accepted configuration, any counts (wrapping), any period and resets between
 /// the updates, `update` never panics and reports only finite values, the heading in (−π, π] and
 /// the position within ±`MAX_POSITION_M`; no result ever needs the non-finite guard; a refused
 /// period changes nothing but its counter.

@@ -81,10 +81,13 @@ fn plausible_command(src: &mut impl Source) -> MotorCommand {
 
 /// A refusal moved nothing but the counters: `l` is `l0` after one refused event.
 fn assert_only_counted(l0: &Ladder, l: &Ladder) {
-    assert!(unchanged(l0, l));
-    assert_eq!(
-        l.counters().rejected_total(),
-        l0.counters().rejected_total().saturating_add(1)
+    assert!(
+        unchanged(l0, l),
+        "INV-10: a refusal leaves the ladder unchanged but for its counters"
+    );
+    assert!(
+        l.counters().rejected_total() == l0.counters().rejected_total().saturating_add(1),
+        "INV-10: a refusal adds exactly one to the refusal count"
     );
 }
 
@@ -95,18 +98,33 @@ fn check_delivered_as_sent(src: &mut impl Source, l0: &Ladder, l: &Ladder, cmd: 
     let accepted = l.counters().valid_frames != l0.counters().valid_frames;
     if accepted {
         let sp = l.last_valid();
-        assert!(sp.is_some());
+        assert!(
+            sp.is_some(),
+            "INV-12: an accepted frame leaves a valid command held"
+        );
         if let Some(sp) = sp {
             let half = Speed::from_bits(1);
             let sent_l: Speed = Speed::from_num(cmd.left_speed_cmd);
             let sent_r: Speed = Speed::from_num(cmd.right_speed_cmd);
             let [left, right] = sp.axes.map(|a| a.target);
-            assert!(left.saturating_sub(sent_l).saturating_abs() <= half);
-            assert!(right.saturating_sub(sent_r).saturating_abs() <= half);
-            assert_eq!(sp.enable, cmd.enable);
-            assert_eq!(sp.seq(), Some(cmd.seq));
+            assert!(
+                left.saturating_sub(sent_l).saturating_abs() <= half,
+                "INV-12: the left speed is the sent one within one Q16.16 step"
+            );
+            assert!(
+                right.saturating_sub(sent_r).saturating_abs() <= half,
+                "INV-12: the right speed is the sent one within one Q16.16 step"
+            );
+            assert!(
+                sp.enable == cmd.enable,
+                "INV-12: the ladder holds the sent enable"
+            );
+            assert!(
+                sp.seq() == Some(cmd.seq),
+                "INV-12: the ladder holds the sent sequence number"
+            );
         }
-        assert_eq!(l.age(), 0);
+        assert!(l.age() == 0, "INV-12: a valid frame resets the age");
     }
     cover!(src, accepted, "accepted");
     cover!(
@@ -179,7 +197,10 @@ pub fn single_bit_flip_never_reaches_the_ladder(src: &mut impl Source) {
     }
     let (l, decoded) = receive(&l0, &frame);
     assert!(!decoded, "a single bit flip never decodes");
-    assert!(unchanged(&l0, &l));
+    assert!(
+        unchanged(&l0, &l),
+        "INV-11: a flipped frame leaves the ladder unchanged but for its counters"
+    );
     let (clean, _) = receive(&l0, &clean_frame);
     cover!(
         src,
@@ -203,10 +224,9 @@ pub fn valid_frame_delivers_the_sent_command(src: &mut impl Source) {
     let cmd = plausible_command(src);
     let mut frame = [0u8; FRAME_LEN];
     encode_command(&cmd, &mut frame);
-    assert_eq!(
-        decode_command(&frame),
-        Ok(cmd),
-        "a freshly encoded frame decodes to itself"
+    assert!(
+        decode_command(&frame) == Ok(cmd),
+        "INV-12: a freshly encoded frame decodes to itself"
     );
     let (l, _) = receive(&l0, &frame);
     check_delivered_as_sent(src, &l0, &l, &cmd);

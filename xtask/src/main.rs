@@ -7,9 +7,13 @@
 //! --output-into-files` writes (one file per harness, named by its path) and prints the Markdown
 //! table of `proofs/REPORT.md`: harness, result, checks, covers, verification time, one row per
 //! harness in name order, so the report's figures come from a run, not from typing.
+//!
+//! `trace`: checks that `proofs/SAFETY.md`, `proofs/REPORT.md` and the harness code agree (see
+//! `trace`): one line per problem, non-zero exit if there is any.
 #![forbid(unsafe_code)]
 
 mod e2e;
+mod trace;
 
 use std::fmt::Write as _;
 use std::path::Path;
@@ -119,6 +123,28 @@ fn main() -> ExitCode {
                 ExitCode::FAILURE
             }
         },
+        ["trace"] => {
+            let root = Path::new(env!("CARGO_MANIFEST_DIR"))
+                .parent()
+                .unwrap_or(Path::new("."));
+            match trace::run(root) {
+                Ok(problems) if problems.is_empty() => {
+                    println!("xtask trace: SAFETY.md, REPORT.md and the harness code agree");
+                    ExitCode::SUCCESS
+                }
+                Ok(problems) => {
+                    for p in &problems {
+                        eprintln!("{p}");
+                    }
+                    eprintln!("xtask trace: {} problem(s)", problems.len());
+                    ExitCode::FAILURE
+                }
+                Err(e) => {
+                    eprintln!("xtask trace: {e}");
+                    ExitCode::FAILURE
+                }
+            }
+        }
         ["qemu-e2e", profile] => {
             let root = Path::new(env!("CARGO_MANIFEST_DIR"))
                 .parent()
@@ -136,7 +162,7 @@ fn main() -> ExitCode {
         }
         _ => {
             eprintln!(
-                "usage: cargo xtask kani-table <dir of `--output-into-files` results>\n       cargo xtask qemu-e2e <cdc|teensy>"
+                "usage: cargo xtask kani-table <dir of `--output-into-files` results>\n       cargo xtask trace\n       cargo xtask qemu-e2e <cdc|teensy>"
             );
             ExitCode::FAILURE
         }

@@ -58,7 +58,7 @@ fn at(m: &[i8; 9], r: usize, c: usize) -> i32 {
         .map_or(0, i32::from)
 }
 
-/// Orientation check: accepted ⇔ M · Mᵀ = I and det M = +1.
+/// P-18: Orientation check: accepted ⇔ M · Mᵀ = I and det M = +1.
 pub fn orientation_check_is_the_definition(src: &mut impl Source) {
     let m = i8x9(src);
     let mut orthogonal = true;

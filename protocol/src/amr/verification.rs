@@ -137,14 +137,17 @@ fn decode_total<S: Source, M>(
 ) {
     let f = shaped_frame(src, encode_valid);
     let r = decode(&f).map(|_| ());
-    assert!(matches!(
-        r,
-        Ok(())
-            | Err(RejectReason::Crc
-                | RejectReason::Framing
-                | RejectReason::Decode
-                | RejectReason::Version)
-    ));
+    assert!(
+        matches!(
+            r,
+            Ok(())
+                | Err(RejectReason::Crc
+                    | RejectReason::Framing
+                    | RejectReason::Decode
+                    | RejectReason::Version)
+        ),
+        "P-21: the decoder returns a message or one of its typed errors"
+    );
     cover!(src, r.is_ok(), "decoded");
     cover!(src, r == Err(RejectReason::Crc), "crc error");
     cover!(src, r == Err(RejectReason::Framing), "framing error");
@@ -152,7 +155,7 @@ fn decode_total<S: Source, M>(
     cover!(src, r == Err(RejectReason::Version), "version error");
 }
 
-/// [`decode_total`] for `decode_command`.
+/// P-21: [`decode_total`] for `decode_command`.
 pub(crate) fn check_decode_command_total(src: &mut impl Source) {
     decode_total(
         src,
@@ -161,7 +164,7 @@ pub(crate) fn check_decode_command_total(src: &mut impl Source) {
     );
 }
 
-/// [`decode_total`] for `decode_feedback`.
+/// P-21: [`decode_total`] for `decode_feedback`.
 pub(crate) fn check_decode_feedback_total(src: &mut impl Source) {
     decode_total(
         src,
@@ -170,12 +173,12 @@ pub(crate) fn check_decode_feedback_total(src: &mut impl Source) {
     );
 }
 
-/// [`decode_total`] for `decode_info`.
+/// P-21: [`decode_total`] for `decode_info`.
 pub(crate) fn check_decode_info_total(src: &mut impl Source) {
     decode_total(src, |s, f| encode_info(&any_info(s), f), decode_info);
 }
 
-/// [`decode_total`] for `decode_mcu_frame`, with valid frames of both kinds.
+/// P-21: [`decode_total`] for `decode_mcu_frame`, with valid frames of both kinds.
 pub(crate) fn check_decode_mcu_frame_total(src: &mut impl Source) {
     decode_total(
         src,
@@ -190,16 +193,22 @@ pub(crate) fn check_decode_mcu_frame_total(src: &mut impl Source) {
     );
 }
 
-/// encode → decode gives back the same command, bit for bit; out-of-range modes are refused, never truncated.
+/// P-21: encode → decode gives back the same command, bit for bit; out-of-range modes are refused, never truncated.
 pub(crate) fn check_command_round_trip(src: &mut impl Source) {
     let cmd = any_command(src);
     let mut f = [0u8; FRAME_LEN];
     encode_command(&cmd, &mut f);
     let r = decode_command(&f);
     if cmd.control_mode <= 0xFF {
-        assert!(matches!(r, Ok(d) if same_command(&d, &cmd)));
+        assert!(
+            matches!(r, Ok(d) if same_command(&d, &cmd)),
+            "P-21: a command with an in-range mode decodes to itself"
+        );
     } else {
-        assert_eq!(r, Err(RejectReason::Decode));
+        assert!(
+            r == Err(RejectReason::Decode),
+            "P-21: a command with an out-of-range mode is refused as Decode"
+        );
     }
     cover!(src, cmd.left_speed_cmd.is_nan(), "NaN speed round-trips");
     cover!(src, cmd.request == REQUEST_IDENTITY, "identity requested");
@@ -207,16 +216,22 @@ pub(crate) fn check_command_round_trip(src: &mut impl Source) {
     cover!(src, usize::from(f[0]) == MAX_COMMAND_LEN, "longest command");
 }
 
-/// encode → decode gives back the same feedback, bit for bit.
+/// P-21: encode → decode gives back the same feedback, bit for bit.
 pub(crate) fn check_feedback_round_trip(src: &mut impl Source) {
     let fb = any_feedback(src);
     let mut f = [0u8; FRAME_LEN];
     encode_feedback(&fb, &mut f);
     let r = decode_feedback(&f);
     if fb.fault_flags <= 0xFFFF && fb.mode <= 0xFF {
-        assert!(matches!(r, Ok(d) if same_feedback(&d, &fb)));
+        assert!(
+            matches!(r, Ok(d) if same_feedback(&d, &fb)),
+            "P-21: feedback with an in-range mode decodes to itself"
+        );
     } else {
-        assert_eq!(r, Err(RejectReason::Decode));
+        assert!(
+            r == Err(RejectReason::Decode),
+            "P-21: feedback with an out-of-range mode is refused as Decode"
+        );
     }
     cover!(src, fb.left_encoder < 0, "negative encoder count");
     cover!(
@@ -227,20 +242,35 @@ pub(crate) fn check_feedback_round_trip(src: &mut impl Source) {
     cover!(src, fb.mode > 0xFF, "out-of-range mode refused");
 }
 
-/// encode → decode gives back the same info message, through `decode_info` and through
+/// P-21: encode → decode gives back the same info message, through `decode_info` and through
 /// `decode_mcu_frame`; `decode_feedback` refuses the frame as `Version` (no `protocol_version`), and
 /// `decode_info` refuses the feedback frame of any feedback the same way (no `info_version`).
 pub(crate) fn check_info_round_trip(src: &mut impl Source) {
     let info = any_info(src);
     let mut f = [0u8; FRAME_LEN];
     encode_info(&info, &mut f);
-    assert_eq!(decode_info(&f), Ok(info));
-    assert_eq!(decode_mcu_frame(&f), Ok(McuFrame::Info(info)));
-    assert_eq!(decode_feedback(&f), Err(RejectReason::Version));
-    assert_eq!(decode_command(&f), Err(RejectReason::Version));
+    assert!(
+        decode_info(&f) == Ok(info),
+        "P-21: an identity frame decodes to the identity sent"
+    );
+    assert!(
+        decode_mcu_frame(&f) == Ok(McuFrame::Info(info)),
+        "P-21: an identity frame decodes as McuFrame::Info of the identity sent"
+    );
+    assert!(
+        decode_feedback(&f) == Err(RejectReason::Version),
+        "P-21: the feedback decoder refuses an identity frame as Version"
+    );
+    assert!(
+        decode_command(&f) == Err(RejectReason::Version),
+        "P-21: the command decoder refuses an identity frame as Version"
+    );
     let mut g = [0u8; FRAME_LEN];
     encode_feedback(&any_feedback(src), &mut g);
-    assert_eq!(decode_info(&g), Err(RejectReason::Version));
+    assert!(
+        decode_info(&g) == Err(RejectReason::Version),
+        "P-21: the identity decoder refuses a feedback frame as Version"
+    );
     cover!(src, usize::from(f[0]) == MAX_INFO_LEN, "longest info");
     cover!(
         src,
@@ -250,7 +280,7 @@ pub(crate) fn check_info_round_trip(src: &mut impl Source) {
     cover!(src, info.board == BoardProfile::PiSpi, "last board profile");
 }
 
-/// Flipping any one of the 512 bits of a valid command frame makes it rejected.
+/// P-21: Flipping any one of the 512 bits of a valid command frame makes it rejected.
 pub(crate) fn check_command_bit_flip_detected(src: &mut impl Source) {
     let cmd = any_command(src);
     assume!(src, cmd.control_mode <= 0xFF);
@@ -258,7 +288,10 @@ pub(crate) fn check_command_bit_flip_detected(src: &mut impl Source) {
     encode_command(&cmd, &mut f);
     let bit = usize::from(src.u16() % (FRAME_LEN as u16 * 8));
     f[bit / 8] ^= 1 << (bit % 8);
-    assert!(decode_command(&f).is_err());
+    assert!(
+        decode_command(&f).is_err(),
+        "P-21: a command frame with one bit flipped is refused"
+    );
     let byte = bit / 8;
     let len = usize::from(f[0]);
     cover!(src, byte == LEN_OFFSET, "flip in length");
@@ -275,19 +308,22 @@ pub(crate) fn check_command_bit_flip_detected(src: &mut impl Source) {
     cover!(src, byte >= CRC_OFFSET, "flip in crc");
 }
 
-/// Flipping any one of the 512 bits of a valid feedback frame makes it rejected.
+/// P-21: Flipping any one of the 512 bits of a valid feedback frame makes it rejected.
 pub(crate) fn check_feedback_bit_flip_detected(src: &mut impl Source) {
     let fb = any_feedback(src);
     let mut f = [0u8; FRAME_LEN];
     encode_feedback(&fb, &mut f);
     let bit = usize::from(src.u16() % (FRAME_LEN as u16 * 8));
     f[bit / 8] ^= 1 << (bit % 8);
-    assert!(decode_feedback(&f).is_err());
+    assert!(
+        decode_feedback(&f).is_err(),
+        "P-21: a feedback frame with one bit flipped is refused"
+    );
     cover!(src, bit / 8 >= CRC_OFFSET, "flip in crc");
     cover!(src, bit / 8 < CRC_OFFSET, "flip before crc");
 }
 
-/// `open` (CRC, length, padding) returns a payload or `Crc` / `Framing` for every 64-byte input, and
+/// P-21: `open` (CRC, length, padding) returns a payload or `Crc` / `Framing` for every 64-byte input, and
 /// returns a payload only when the stored CRC (big-endian) matches the bytes before it and the
 /// payload is the `LEN` bytes after the length byte.
 ///
@@ -306,12 +342,20 @@ pub(crate) fn check_open_total(src: &mut impl Source) {
     let r = open(&f);
     match r {
         Ok(p) => {
-            assert!(crc_good);
-            assert_eq!(p.len(), usize::from(f[LEN_OFFSET]));
-            assert!(p.len() <= MAX_PAYLOAD);
+            assert!(crc_good, "P-21: a frame opens only with a matching CRC");
+            assert!(
+                p.len() == usize::from(f[LEN_OFFSET]),
+                "P-21: an opened payload has the length byte's length"
+            );
+            assert!(
+                p.len() <= MAX_PAYLOAD,
+                "P-21: an opened payload fits the frame"
+            );
         }
-        Err(RejectReason::Crc) => assert!(!crc_good),
-        Err(RejectReason::Framing) => assert!(crc_good),
+        Err(RejectReason::Crc) => assert!(!crc_good, "P-21: a Crc refusal only for a wrong CRC"),
+        Err(RejectReason::Framing) => {
+            assert!(crc_good, "P-21: a Framing refusal only with a good CRC")
+        }
         Err(_) => panic!("open refused for a reason it does not check"),
     }
     cover!(src, r.is_ok(), "frame opened");
@@ -328,7 +372,7 @@ pub(crate) fn check_open_total(src: &mut impl Source) {
     );
 }
 
-/// The shape half of [`check_open_total`], for the Kani harness that replaces the CRC by any
+/// P-3: The shape half of [`check_open_total`], for the Kani harness that replaces the CRC by any
 /// value (`crc16::verification::model::any_checksum`): for every 64-byte input and whatever the
 /// CRC says, `open` returns a payload of exactly `LEN` ≤ [`MAX_PAYLOAD`] bytes, or `Crc` or
 /// `Framing`, and never panics. The twin of [`check_open_total`] checks the CRC half with the
@@ -350,8 +394,14 @@ pub(crate) fn check_open_shape(src: &mut impl Source) {
     let r = open(&f);
     match r {
         Ok(p) => {
-            assert_eq!(p.len(), usize::from(f[LEN_OFFSET]));
-            assert!(p.len() <= MAX_PAYLOAD);
+            assert!(
+                p.len() == usize::from(f[LEN_OFFSET]),
+                "P-3: an opened payload has the length byte's length"
+            );
+            assert!(
+                p.len() <= MAX_PAYLOAD,
+                "P-3: an opened payload fits the frame"
+            );
         }
         Err(RejectReason::Crc | RejectReason::Framing) => {}
         Err(_) => panic!("open refused for a reason it does not check"),
@@ -365,7 +415,7 @@ pub(crate) fn check_open_shape(src: &mut impl Source) {
     );
 }
 
-/// Flipping any one of the 512 bits of the frame `f` (sealed: CRC good) makes `open`, and so both
+/// P-7, INV-11 (bytes side): Flipping any one of the 512 bits of the frame `f` (sealed: CRC good) makes `open`, and so both
 /// decoders, refuse it as `Crc`: every bit before the CRC is covered by it, and the CRC is stored
 /// big-endian, so a flip anywhere is a one-bit error pattern of the 64-byte codeword. Whether a
 /// pattern is caught does not depend on the frame's content (the checksum is affine, see
@@ -374,7 +424,10 @@ pub(crate) fn check_bit_flip_refused_by_open(src: &mut impl Source, f: &[u8; FRA
     let bit = usize::from(src.u16() % (FRAME_LEN as u16 * 8));
     let mut g = *f;
     g[bit / 8] ^= 1 << (bit % 8);
-    assert_eq!(open(&g).map(|_| ()), Err(RejectReason::Crc));
+    assert!(
+        open(&g).map(|_| ()) == Err(RejectReason::Crc),
+        "P-7: a single-bit flip of a sealed command frame is refused as Crc"
+    );
     cover!(src, bit / 8 == LEN_OFFSET, "flip in length");
     cover!(src, bit / 8 >= CRC_OFFSET, "flip in crc");
     cover!(
@@ -418,13 +471,19 @@ fn field_step<S: Source, M>(
     let mut r = Reader::new(&buf[..len]);
     match r.next_field() {
         Ok(Some((field, v))) => {
-            assert!(r.remaining() + 2 <= len);
+            assert!(
+                r.remaining() + 2 <= len,
+                "P-3: each decode-loop step consumes at least 2 bytes"
+            );
             let applied = apply(&mut msg, field, v);
             cover!(src, applied.is_err(), "field refused");
             Some((field, applied))
         }
         Ok(None) => {
-            assert_eq!(len, 0);
+            assert!(
+                len == 0,
+                "P-3: the decode loop ends only when the payload is used up"
+            );
             None
         }
         Err(_) => {
@@ -434,7 +493,7 @@ fn field_step<S: Source, M>(
     }
 }
 
-/// [`field_step`] of the command decode loop, from any command decoded so far.
+/// P-3: [`field_step`] of the command decode loop, from any command decoded so far.
 pub(crate) fn check_command_field_step(src: &mut impl Source) {
     let msg = (any_command(src), src.u32());
     if let Some((field, applied)) = field_step(src, msg, apply_command_field) {
@@ -457,7 +516,7 @@ pub(crate) fn check_command_field_step(src: &mut impl Source) {
     }
 }
 
-/// [`field_step`] of the feedback decode loop, from any feedback decoded so far.
+/// P-3: [`field_step`] of the feedback decode loop, from any feedback decoded so far.
 pub(crate) fn check_feedback_field_step(src: &mut impl Source) {
     let msg = (any_feedback(src), src.u32());
     if let Some((field, applied)) = field_step(src, msg, apply_feedback_field) {
@@ -469,7 +528,7 @@ pub(crate) fn check_feedback_field_step(src: &mut impl Source) {
     }
 }
 
-/// [`field_step`] of the info decode loop, from any info decoded so far.
+/// P-3: [`field_step`] of the info decode loop, from any info decoded so far.
 pub(crate) fn check_info_field_step(src: &mut impl Source) {
     let msg = (any_info(src), src.u32());
     if let Some((field, applied)) = field_step(src, msg, apply_info_field) {
@@ -627,10 +686,16 @@ fn field_round_trip<S: Source, M: Copy + Default>(
         write(&mut w, m, field);
         w.len()
     };
-    assert!(n <= max(field));
+    assert!(
+        n <= max(field),
+        "P-6: a field takes at most its bound's bytes"
+    );
     if n == 0 {
         // Omitted: the decoded message keeps the default, which is `m`'s value.
-        assert!(same(&with(default, m, field), &default));
+        assert!(
+            same(&with(default, m, field), &default),
+            "P-6: only a default value is omitted"
+        );
         return (n, Ok(()));
     }
     // The payload ends anywhere after the field.
@@ -639,20 +704,29 @@ fn field_round_trip<S: Source, M: Copy + Default>(
     let Ok(Some((read, v))) = r.next_field() else {
         panic!("a written field did not read back");
     };
-    assert_eq!(read, field);
-    assert_eq!(r.remaining(), total - n);
+    assert!(
+        read == field,
+        "P-6: the field read back is the field written"
+    );
+    assert!(
+        r.remaining() == total - n,
+        "P-6: one decode-loop step consumes exactly the field's bytes"
+    );
     let mut got = state;
     let applied = apply(&mut got, read, v);
     if in_range {
-        assert!(applied.is_ok());
-        assert!(same(&got, &with(state, m, field)));
+        assert!(applied.is_ok(), "P-6: an in-range field is applied");
+        assert!(
+            same(&got, &with(state, m, field)),
+            "P-6: the field read back sets exactly that member"
+        );
     } else {
-        assert!(applied.is_err());
+        assert!(applied.is_err(), "P-6: an out-of-range field is refused");
     }
     (n, applied)
 }
 
-/// [`field_round_trip`] for every command field.
+/// P-6: [`field_round_trip`] for every command field.
 pub(crate) fn check_command_field_round_trip(src: &mut impl Source) {
     let cmd = any_command(src);
     let field = command_field::ALL[usize::from(src.below(command_field::ALL.len() as u8))];
@@ -669,7 +743,7 @@ pub(crate) fn check_command_field_round_trip(src: &mut impl Source) {
     );
 }
 
-/// [`field_round_trip`] for every feedback field.
+/// P-6: [`field_round_trip`] for every feedback field.
 pub(crate) fn check_feedback_field_round_trip(src: &mut impl Source) {
     use feedback_field as f;
     let fb = any_feedback(src);
@@ -689,7 +763,7 @@ pub(crate) fn check_feedback_field_round_trip(src: &mut impl Source) {
     );
 }
 
-/// [`field_round_trip`] for every info field (every value of its type is in range: the enums
+/// P-6: [`field_round_trip`] for every info field (every value of its type is in range: the enums
 /// hold only defined values, so the encoder never writes one the decoder refuses).
 pub(crate) fn check_info_field_round_trip(src: &mut impl Source) {
     use info_field as f;
@@ -697,7 +771,10 @@ pub(crate) fn check_info_field_round_trip(src: &mut impl Source) {
     let field = f::ALL[usize::from(src.below(f::ALL.len() as u8))];
     let state = (any_info(src), src.u32());
     let (n, applied) = field_round_trip(src, &INFO_FIELDS, &info, field, state, true);
-    assert!(applied.is_ok());
+    assert!(
+        applied.is_ok(),
+        "P-6: every identity field read back is applied"
+    );
     cover!(src, n == 0, "default value omitted");
     cover!(src, n == 7, "longest field");
     cover!(
@@ -707,7 +784,7 @@ pub(crate) fn check_info_field_round_trip(src: &mut impl Source) {
     );
 }
 
-/// A frame made as the encoders make it (any payload of any length at the front of the payload
+/// P-6: A frame made as the encoders make it (any payload of any length at the front of the payload
 /// region, zeros after it, `seal`) is opened to exactly that payload: the same bytes, in place.
 pub(crate) fn check_seal_open(src: &mut impl Source) {
     let mut f: [u8; FRAME_LEN] = src.bytes();
@@ -717,8 +794,14 @@ pub(crate) fn check_seal_open(src: &mut impl Source) {
     let Ok(opened) = open(&f) else {
         panic!("a sealed frame was refused");
     };
-    assert_eq!(opened.len(), len);
-    assert!(core::ptr::eq(opened.as_ptr(), f[PAYLOAD_OFFSET..].as_ptr()));
+    assert!(
+        opened.len() == len,
+        "P-6: a sealed frame opens to a payload of the sealed length"
+    );
+    assert!(
+        core::ptr::eq(opened.as_ptr(), f[PAYLOAD_OFFSET..].as_ptr()),
+        "P-6: the payload is opened in place"
+    );
     cover!(src, len == MAX_PAYLOAD, "full payload");
     cover!(src, len == 0, "empty payload");
 }

@@ -54,7 +54,7 @@ fn any_message_of(src: &mut impl Source, kind: u8) -> Message {
     }
 }
 
-/// `decode_frame` returns a message or a typed error for every input of every length up to
+/// P-4: `decode_frame` returns a message or a typed error for every input of every length up to
 /// [`MAX_FRAME_LEN`] (a longer slice cannot match `6 + LEN` and is refused at the length check).
 pub(crate) fn check_decode_frame_total(src: &mut impl Source) {
     let mut buf: [u8; MAX_FRAME_LEN] = src.bytes();
@@ -124,7 +124,10 @@ pub(crate) fn check_stream_total(src: &mut impl Source) {
         fed += n;
         for &b in &chunk[..n] {
             let r = dec.push(b);
-            assert!(dec.buffered() <= MAX_FRAME_LEN);
+            assert!(
+                dec.buffered() <= MAX_FRAME_LEN,
+                "P-4: the stream decoder holds at most one frame"
+            );
             match r {
                 Some(Ok(_)) => ok += 1,
                 Some(Err(Error::Crc)) => crc_results += 1,
@@ -134,10 +137,19 @@ pub(crate) fn check_stream_total(src: &mut impl Source) {
         }
     }
     let s = dec.stats();
-    assert_eq!(s.frames, ok);
-    assert_eq!(s.message_errors, message_errors);
+    assert!(
+        s.frames == ok,
+        "P-4: the stream counts every frame it delivers"
+    );
+    assert!(
+        s.message_errors == message_errors,
+        "P-4: the stream counts every message error it reports"
+    );
     // One `Err(Crc)` reports every candidate that failed at that byte.
-    assert!(crc_results <= s.crc_errors);
+    assert!(
+        crc_results <= s.crc_errors,
+        "P-4: every CRC error reported is counted"
+    );
     cover!(
         src,
         ok > 0 && s.dropped_bytes > 0,
@@ -151,7 +163,7 @@ pub(crate) fn check_stream_total(src: &mut impl Source) {
     cover!(src, ok > 1, "several frames");
 }
 
-/// `candidate_at` from any state (any bytes, any length held, any start): never panics, and
+/// P-4: `candidate_at` from any state (any bytes, any length held, any start): never panics, and
 /// gives a verdict only where the bytes held from `start` on are a candidate: `AA 55`, then a LEN
 /// that makes the frame end exactly at the last byte held. A good CRC is never a framing error.
 pub(crate) fn check_candidate_at(src: &mut impl Source) {
@@ -204,7 +216,7 @@ pub(crate) fn check_candidate_at(src: &mut impl Source) {
     );
 }
 
-/// `append` from any state (any bytes, any count held and dropped, any counters): the byte goes
+/// P-4: `append` from any state (any bytes, any count held and dropped, any counters): the byte goes
 /// last; when the buffer is full the bytes held first move to its front (the oldest byte goes,
 /// counted, if none was dropped), in order; nothing else changes. [`model::append`] stands in for
 /// it with the counts alone.
@@ -243,7 +255,7 @@ pub(crate) fn check_append(src: &mut impl Source) {
     cover!(src, !full, "byte added");
 }
 
-/// `may_start` from any state and any position: never panics, and says yes only for a position
+/// P-4: `may_start` from any state and any position: never panics, and says yes only for a position
 /// held whose candidate can still end after the last byte held, that is fewer than
 /// `MAX_FRAME_LEN` bytes before the end (so a full buffer's first byte held is never its first
 /// byte after `advance`). [`model::may_start`] stands in for it with exactly this.
@@ -272,7 +284,7 @@ pub(crate) fn check_may_start(src: &mut impl Source) {
     cover!(src, yes && len - i == 1, "a lone AA");
 }
 
-/// One `push` from *any* state (up to a full buffer of any bytes, any of them already dropped,
+/// P-4: One `push` from *any* state (up to a full buffer of any bytes, any of them already dropped,
 /// any counters) never panics, never overfills, never lowers a counter; a delivered frame leaves
 /// nothing held, and otherwise fewer than `MAX_FRAME_LEN` bytes stay held (so when the next byte
 /// finds the buffer full, the byte it moves out is a dropped one). `push` has no other loops than
@@ -475,7 +487,7 @@ impl Reference {
 /// make candidates.
 const GARBAGE: usize = if cfg!(kani) { 3 } else { 24 };
 
-/// No valid frame is held back by the bytes before it: any garbage, then the frame of `m`, fed
+/// P-5: No valid frame is held back by the bytes before it: any garbage, then the frame of `m`, fed
 /// byte by byte, gives at every byte what the naive [`Reference`] says, and the frame is
 /// delivered at its last byte unless the garbage began a frame with a good CRC that took some
 /// of its bytes.
@@ -548,7 +560,7 @@ pub(crate) fn check_round_trip_of(src: &mut impl Source, kind: u8) -> Message {
     m
 }
 
-/// The stream half of [`check_round_trip_of`] on its own (one CRC computation fewer under Kani).
+/// P-6, P-21: The stream half of [`check_round_trip_of`] on its own (one CRC computation fewer under Kani).
 pub(crate) fn check_stream_round_trip_of(src: &mut impl Source, kind: u8) {
     let m = any_message_of(src, kind);
     let mut buf = [0u8; MAX_FRAME_LEN];
@@ -565,14 +577,20 @@ fn stream_delivers(m: &Message, buf: &[u8; MAX_FRAME_LEN], n: usize) {
     for (i, &b) in buf[..n].iter().enumerate() {
         if let Some(r) = dec.push(b) {
             // Delivered at the frame's last byte, not before.
-            assert_eq!(i + 1, n);
+            assert!(
+                i + 1 == n,
+                "P-6: a frame is delivered at its last byte, not before"
+            );
             got = Some(r);
         }
     }
-    assert_eq!(got, Some(Ok(*m)));
+    assert!(
+        got == Some(Ok(*m)),
+        "P-6: the stream delivers the message sent"
+    );
 }
 
-/// encode → `decode_frame` gives back the same message, for one message kind (under Kani one
+/// P-6: encode → `decode_frame` gives back the same message, for one message kind (under Kani one
 /// harness per kind: with the kind symbolic every field sits at a symbolic offset). Returns the
 /// message and its frame.
 pub(crate) fn check_frame_round_trip_of(
@@ -582,8 +600,14 @@ pub(crate) fn check_frame_round_trip_of(
     let m = any_message_of(src, kind);
     let mut buf = [0u8; MAX_FRAME_LEN];
     let n = m.encode(&mut buf);
-    assert!(n == HEADER_LEN + m.id().payload_len() + CRC_LEN);
-    assert!(decode_frame(&buf[..n]) == Ok(m));
+    assert!(
+        n == HEADER_LEN + m.id().payload_len() + CRC_LEN,
+        "P-6: a frame has its kind's length"
+    );
+    assert!(
+        decode_frame(&buf[..n]) == Ok(m),
+        "P-6: a frame decodes to the message sent"
+    );
     cover!(src, buf[n - 2..n] != [0, 0], "frame with a non-zero CRC");
     (m, buf, n)
 }
@@ -612,7 +636,7 @@ pub(crate) enum Flip {
     OtherBytes,
 }
 
-/// [`check_bit_flip_detected`] for the frame of `m`. With the checksum affine over GF(2) (see
+/// P-7: [`check_bit_flip_detected`] for the frame of `m`. With the checksum affine over GF(2) (see
 /// `crc16::verification`), whether a flip in the covered bytes or the CRC is caught depends only
 /// on the flip and the frame length, not on the frame's content; a flip in the SOF or LEN is a
 /// framing error whatever the content. So one frame per length, every bit, covers every frame of
@@ -641,9 +665,12 @@ pub(crate) fn check_bit_flip_detected_in(src: &mut impl Source, m: &Message, reg
         }
     }
     let r = decode_frame(&buf[..n]);
-    assert!(r.is_err());
+    assert!(r.is_err(), "P-7: a frame with one bit flipped is refused");
     if region == Flip::LenByte {
-        assert_eq!(r, Err(Error::Framing));
+        assert!(
+            r == Err(Error::Framing),
+            "P-7: a flip of the LEN byte is refused as Framing"
+        );
         cover!(src, buf[LEN_INDEX] > 4, "LEN made longer");
     } else {
         cover!(src, byte < 2, "flip in SOF");

@@ -97,7 +97,10 @@ pub(crate) fn check_bursts_detected(src: &mut impl Source, order: Order, n: usiz
     assume!(src, burst.is_some());
     let Some(e) = burst else { return };
     let zeros = [0u8; MAX_COVERED];
-    assert!(syndrome(&e, n, order, checksum(&zeros[..n])) != 0);
+    assert!(
+        syndrome(&e, n, order, checksum(&zeros[..n])) != 0,
+        "P-1: the burst changes the CRC check (non-zero syndrome)"
+    );
     let body_hit = e[..n].iter().any(|&b| b != 0);
     let crc_hit = e[n] != 0 || e[n + 1] != 0;
     let wrong_bits: u32 = e.iter().map(|b| b.count_ones()).sum();
@@ -116,12 +119,12 @@ pub(crate) fn check_bursts_detected(src: &mut impl Source, order: Order, n: usiz
     cover!(src, body_hit && !crc_hit, "burst in the covered bytes only");
 }
 
-/// [`check_bursts_detected`] for the seed 000 frame: 62 covered bytes, CRC big-endian.
+/// P-1: [`check_bursts_detected`] for the seed 000 frame: 62 covered bytes, CRC big-endian.
 pub(crate) fn check_bursts_detected_seed000(src: &mut impl Source) {
     check_bursts_detected(src, Order::Big, MAX_COVERED);
 }
 
-/// [`check_bursts_detected`] for the longest seed 001 frame (IMU: 22 covered bytes), CRC
+/// P-1: [`check_bursts_detected`] for the longest seed 001 frame (IMU: 22 covered bytes), CRC
 /// little-endian.
 pub(crate) fn check_bursts_detected_seed001_imu(src: &mut impl Source) {
     check_bursts_detected(src, Order::Little, 22);
@@ -131,7 +134,7 @@ pub(crate) fn check_bursts_detected_seed001_imu(src: &mut impl Source) {
 /// 257 of its bytes), which is longer than every other covered run.
 const TOTAL_MAX: usize = crate::cdc::MAX_FRAME_LEN;
 
-/// [`checksum`] is total: any bytes of any length up to [`TOTAL_MAX`], never a panic.
+/// P-2: [`checksum`] is total: any bytes of any length up to [`TOTAL_MAX`], never a panic.
 pub(crate) fn check_checksum_total(src: &mut impl Source) {
     let buf: [u8; TOTAL_MAX] = src.bytes();
     let n = usize::from(src.u16()) % (TOTAL_MAX + 1);
@@ -193,7 +196,7 @@ pub(crate) mod model {
 mod proofs {
     use statemachine::harness::KaniSource;
 
-    /// Each block function returns for every register and every block (its contract).
+    /// P-2: Each block function returns for every register and every block (its contract).
     macro_rules! block_total {
         ($($harness:ident => $f:ident, $n:literal);+) => {$(
             #[kani::proof_for_contract(crate::crc16::$f)]

@@ -60,7 +60,7 @@ pub(crate) fn any_rx(src: &mut impl Source) -> RxBuffer {
     }
 }
 
-/// `decode_rx` and `decode_tx` return a buffer or a typed error for every input.
+/// P-4: `decode_rx` and `decode_tx` return a buffer or a typed error for every input.
 pub(crate) fn check_decode_total(src: &mut impl Source) {
     let mut rx = [0u8; RX_LEN];
     if src.bool() {
@@ -74,23 +74,29 @@ pub(crate) fn check_decode_total(src: &mut impl Source) {
         rx[i] = src.u8();
     }
     let r = decode_rx(&rx);
-    assert!(matches!(
-        r,
-        Ok(_) | Err(RejectReason::Version | RejectReason::Parity | RejectReason::Decode)
-    ));
+    assert!(
+        matches!(
+            r,
+            Ok(_) | Err(RejectReason::Version | RejectReason::Parity | RejectReason::Decode)
+        ),
+        "P-4: decode_rx returns a buffer or one of its typed errors"
+    );
     let mut tx = [0u8; TX_LEN];
     for b in tx.iter_mut() {
         *b = src.u8();
     }
     let t = decode_tx(&tx);
-    assert!(matches!(t, Ok(_) | Err(RejectReason::Version)));
+    assert!(
+        matches!(t, Ok(_) | Err(RejectReason::Version)),
+        "P-4: decode_tx returns a buffer or Version"
+    );
     cover!(src, r.is_ok(), "rx decoded");
     cover!(src, r == Err(RejectReason::Version), "rx version error");
     cover!(src, r == Err(RejectReason::Parity), "rx parity error");
     cover!(src, r == Err(RejectReason::Decode), "rx decode error");
 }
 
-/// encode → decode gives back the same buffers, bit for bit.
+/// P-6: encode → decode gives back the same buffers, bit for bit.
 pub(crate) fn check_round_trip(src: &mut impl Source) {
     let rx = any_rx(src);
     let mut b = [0u8; RX_LEN];
@@ -102,8 +108,14 @@ pub(crate) fn check_round_trip(src: &mut impl Source) {
         Ok(d) => encode_rx(&d, &mut again),
         Err(_) => panic!("valid rx refused"),
     }
-    assert!(b == again);
-    assert!(parity_ok(u32::from_le_bytes([b[1], b[2], b[3], b[4]])));
+    assert!(
+        b == again,
+        "P-6: the received buffer re-encodes to the same bytes"
+    );
+    assert!(
+        parity_ok(u32::from_le_bytes([b[1], b[2], b[3], b[4]])),
+        "P-6: an encoded buffer has a good parity"
+    );
     let mut tx = TxBuffer {
         update_time: src.u32(),
         ..Default::default()
@@ -119,7 +131,7 @@ pub(crate) fn check_round_trip(src: &mut impl Source) {
         Ok(d) => encode_tx(&d, &mut t2),
         Err(_) => panic!("valid tx refused"),
     }
-    assert!(t == t2);
+    assert!(t == t2, "P-6: the transmitted buffer decodes to itself");
     cover!(
         src,
         rx.updates.0.count_ones().is_multiple_of(2),
@@ -128,20 +140,23 @@ pub(crate) fn check_round_trip(src: &mut impl Source) {
     cover!(src, rx.updates.0.count_ones() % 2 == 1, "parity bit clear");
 }
 
-/// A single flipped bit in the `updates` word is always caught by the parity check.
+/// P-7: A single flipped bit in the `updates` word is always caught by the parity check.
 pub(crate) fn check_updates_bit_flip_detected(src: &mut impl Source) {
     let rx = any_rx(src);
     let mut b = [0u8; RX_LEN];
     encode_rx(&rx, &mut b);
     let bit = usize::from(src.below(32));
     b[1 + bit / 8] ^= 1 << (bit % 8);
-    assert_eq!(decode_rx(&b), Err(RejectReason::Parity));
+    assert!(
+        decode_rx(&b) == Err(RejectReason::Parity),
+        "P-7: a flip in the updates word is refused as Parity"
+    );
     cover!(src, bit == 7, "flip of the parity bit");
     cover!(src, bit < 7, "flip of an update flag");
     cover!(src, bit > 7, "flip of a reserved bit");
 }
 
-/// The checks come first and in the seed's order, for any bytes: a `transferVersion` other than 15
+/// INV-22 (bytes half): The checks come first and in the seed's order, for any bytes: a `transferVersion` other than 15
 /// is `Err(Version)` whatever follows it; with version 15, an `updates` word of even parity is
 /// `Err(Parity)` whatever follows it. (The bytes half of the `pi-spi` board's INV-22; the board's
 /// half, a refusal changes nothing, is `mcu`'s `verify_pi_spi_refusal_changes_nothing`.)

@@ -23,7 +23,7 @@ fn any_msg(src: &mut impl Source) -> Msg {
     }
 }
 
-/// Both decoders return a command or a typed error for every input up to the robust frame size.
+/// P-21: Both decoders return a command or a typed error for every input up to the robust frame size.
 pub(crate) fn check_decode_total(src: &mut impl Source) {
     let mut buf = [0u8; ROBUST_BUF];
     // Under Kani any bytes of any length (shape 0) already include every frame; the other shapes
@@ -65,16 +65,28 @@ pub(crate) fn check_decode_total(src: &mut impl Source) {
     }
 }
 
-/// encode → decode round-trips in both formats.
+/// P-21: encode → decode round-trips in both formats.
 pub(crate) fn check_round_trip(src: &mut impl Source) {
     let m = any_msg(src);
     let mut buf = [0u8; ROBUST_BUF];
     let n = m.encode_legacy(&mut buf);
-    assert_eq!(n, Some(Msg::LEGACY_LEN));
-    assert_eq!(Msg::decode_legacy(&buf[..Msg::LEGACY_LEN]), Ok(m));
+    assert!(
+        n == Some(Msg::LEGACY_LEN),
+        "P-21: the legacy packet has the legacy length"
+    );
+    assert!(
+        Msg::decode_legacy(&buf[..Msg::LEGACY_LEN]) == Ok(m),
+        "P-21: the legacy packet decodes to the message sent"
+    );
     let n = m.encode_robust(&mut buf).unwrap_or(0);
-    assert_eq!(n, Msg::ROBUST_LEN);
-    assert_eq!(Msg::decode_robust(&buf[..n]), Ok(m));
+    assert!(
+        n == Msg::ROBUST_LEN,
+        "P-21: the robust frame has the robust length"
+    );
+    assert!(
+        Msg::decode_robust(&buf[..n]) == Ok(m),
+        "P-21: the robust frame decodes to the message sent"
+    );
     let mut dec = RobustDecoder::<N>::new();
     let mut got = None;
     for &b in &buf[..n] {
@@ -82,19 +94,28 @@ pub(crate) fn check_round_trip(src: &mut impl Source) {
             got = Some(r);
         }
     }
-    assert_eq!(got, Some(Ok(m)));
+    assert!(
+        got == Some(Ok(m)),
+        "P-21: the stream decoder delivers the message sent"
+    );
     cover!(src, m.cmd_type == CmdType::Mtrs, "motor command");
 }
 
-/// The robust frame's body, before COBS, round-trips: `encode_body` → `decode_body` gives back
+/// P-6: The robust frame's body, before COBS, round-trips: `encode_body` → `decode_body` gives back
 /// the same command (real CRC). With [`check_unstuff_inverts_stuff`] and
 /// [`check_stream_delivers_frame`] this is the robust half of [`check_round_trip`] in pieces Kani
 /// can prove.
 pub(crate) fn check_body_round_trip(src: &mut impl Source) {
     let m = any_msg(src);
     let mut body = [0u8; ROBUST_BODY_BUF];
-    assert_eq!(m.encode_body(&mut body), Some(BODY));
-    assert_eq!(Msg::decode_body(&body[..BODY]), Ok(m));
+    assert!(
+        m.encode_body(&mut body) == Some(BODY),
+        "P-6: the robust body has the body length"
+    );
+    assert!(
+        Msg::decode_body(&body[..BODY]) == Ok(m),
+        "P-6: the robust body decodes to the message sent"
+    );
     cover!(
         src,
         body[BODY - 2..BODY] != [0, 0],
@@ -102,7 +123,7 @@ pub(crate) fn check_body_round_trip(src: &mut impl Source) {
     );
 }
 
-/// A frame's bytes fed to a fresh `RobustDecoder` give nothing until the terminator, and then
+/// P-21: A frame's bytes fed to a fresh `RobustDecoder` give nothing until the terminator, and then
 /// exactly what `decode_robust` says of the frame: any non-zero bytes of a frame's length, then 0x00.
 pub(crate) fn check_stream_delivers_frame(src: &mut impl Source) {
     let mut frame: [u8; FRAME] = src.bytes();
@@ -110,7 +131,10 @@ pub(crate) fn check_stream_delivers_frame(src: &mut impl Source) {
         // A valid frame (the twin would not draw one at random).
         let mut body = [0u8; ROBUST_BODY_BUF];
         let _ = any_msg(src).encode_body(&mut body);
-        assert_eq!(stuff_into(&body[..BODY], &mut frame), FRAME);
+        assert!(
+            stuff_into(&body[..BODY], &mut frame) == FRAME,
+            "P-21: a stuffed body fills exactly one frame"
+        );
     }
     for b in frame.iter_mut().take(FRAME - 1) {
         if *b == 0 {
@@ -120,10 +144,16 @@ pub(crate) fn check_stream_delivers_frame(src: &mut impl Source) {
     frame[FRAME - 1] = 0;
     let mut dec = RobustDecoder::<N>::new();
     for &b in &frame[..FRAME - 1] {
-        assert!(dec.push(b).is_none());
+        assert!(
+            dec.push(b).is_none(),
+            "P-21: nothing is delivered before the terminator"
+        );
     }
     let got = dec.push(0);
-    assert!(got == Some(Msg::decode_robust(&frame)));
+    assert!(
+        got == Some(Msg::decode_robust(&frame)),
+        "P-21: the stream answers as decode_robust of the frame"
+    );
     cover!(src, got.is_some_and(|r| r.is_ok()), "command delivered");
     cover!(
         src,
@@ -132,19 +162,22 @@ pub(crate) fn check_stream_delivers_frame(src: &mut impl Source) {
     );
 }
 
-/// A flipped bit anywhere in a robust frame is refused.
+/// P-21: A flipped bit anywhere in a robust frame is refused.
 pub(crate) fn check_bit_flip_detected(src: &mut impl Source) {
     let m = any_msg(src);
     let mut buf = [0u8; ROBUST_BUF];
     let n = m.encode_robust(&mut buf).unwrap_or(0);
     let bit = usize::from(src.u16()) % (n * 8).max(1);
     buf[bit / 8] ^= 1 << (bit % 8);
-    assert!(Msg::decode_robust(&buf[..n]).is_err());
+    assert!(
+        Msg::decode_robust(&buf[..n]).is_err(),
+        "P-21: a robust frame with one bit flipped is refused"
+    );
     cover!(src, bit / 8 == n - 1, "flip in terminator");
     cover!(src, bit / 8 < n - 1, "flip in body");
 }
 
-/// `decode_legacy` returns a command, `Framing` or `Decode` for every input of every length up to
+/// P-4: `decode_legacy` returns a command, `Framing` or `Decode` for every input of every length up to
 /// one byte past a legacy packet.
 pub(crate) fn check_legacy_total(src: &mut impl Source) {
     let mut buf: [u8; Msg::LEGACY_LEN + 1] = src.bytes();
@@ -158,10 +191,10 @@ pub(crate) fn check_legacy_total(src: &mut impl Source) {
         }
     }
     let r = Msg::decode_legacy(&buf[..n]);
-    assert!(matches!(
-        r,
-        Ok(_) | Err(RejectReason::Framing | RejectReason::Decode)
-    ));
+    assert!(
+        matches!(r, Ok(_) | Err(RejectReason::Framing | RejectReason::Decode)),
+        "P-4: decode_legacy returns a message or one of its typed errors"
+    );
     cover!(src, r.is_ok(), "legacy decoded");
     cover!(src, r == Err(RejectReason::Decode), "unknown cmd_type");
     cover!(
@@ -171,7 +204,7 @@ pub(crate) fn check_legacy_total(src: &mut impl Source) {
     );
 }
 
-/// `decode_robust` returns a command or a typed error for every input of every length up to one
+/// P-4: `decode_robust` returns a command or a typed error for every input of every length up to one
 /// byte past the largest robust frame of any motor count. Under Kani the CRC is replaced by any
 /// value (`crc16::verification::model::any_checksum`; `crc16::verify_checksum_total` proves the real
 /// one returns for every input).
@@ -187,20 +220,23 @@ pub(crate) fn check_robust_total(src: &mut impl Source) {
         }
     }
     let r = Msg::decode_robust(&buf[..n]);
-    assert!(matches!(
-        r,
-        Ok(_)
-            | Err(RejectReason::Framing
-                | RejectReason::Crc
-                | RejectReason::Version
-                | RejectReason::Decode)
-    ));
+    assert!(
+        matches!(
+            r,
+            Ok(_)
+                | Err(RejectReason::Framing
+                    | RejectReason::Crc
+                    | RejectReason::Version
+                    | RejectReason::Decode)
+        ),
+        "P-4: decode_robust returns a message or one of its typed errors"
+    );
     cover!(src, r.is_ok(), "robust decoded");
     cover!(src, r == Err(RejectReason::Crc), "robust crc error");
     cover!(src, r == Err(RejectReason::Framing), "robust framing error");
 }
 
-/// One `RobustDecoder::push` from any state (any bytes, any number held up to its limit, any
+/// P-4: One `RobustDecoder::push` from any state (any bytes, any number held up to its limit, any
 /// counters) never panics, keeps the bytes held within the limit, never lowers a counter, answers
 /// only at a 0x00, and keeps exactly the last non-zero bytes of the run: after a non-zero byte the
 /// bytes held are the ones held before, the oldest dropped if the limit was reached, then the new
@@ -301,7 +337,7 @@ pub(crate) fn check_against_reference(stream: &[u8], got: Option<Result<Msg, Rej
 /// worth, biased toward zeros and the frame's own bytes.
 const GARBAGE: usize = if cfg!(kani) { 1 } else { 3 * FRAME };
 
-/// No valid frame is held back by the bytes before it: any garbage, then a frame, fed byte by
+/// P-5: No valid frame is held back by the bytes before it: any garbage, then a frame, fed byte by
 /// byte, gives at every byte what the [`reference`] says, and the frame is delivered at its 0x00.
 /// Under Kani the frame is the harnesses' sample command; the twin takes any command.
 pub(crate) fn check_robust_holds_back_no_frame(src: &mut impl Source) {
@@ -396,7 +432,10 @@ pub(crate) fn stuff_into(body: &[u8], out: &mut [u8]) -> usize {
 /// [`stuff_into`] for a body of the harnesses' motor count.
 fn stuff(body: &[u8; BODY]) -> [u8; FRAME] {
     let mut frame = [0u8; FRAME];
-    assert_eq!(stuff_into(body, &mut frame), FRAME);
+    assert!(
+        stuff_into(body, &mut frame) == FRAME,
+        "P-6: a stuffed body fills exactly one frame"
+    );
     frame
 }
 
@@ -411,7 +450,7 @@ fn with_zeros(src: &mut impl Source, body: &mut [u8]) {
     }
 }
 
-/// `unstuff` inverts [`stuff`] for every body, and the twin checks that corncobs (the encoder of
+/// P-6: `unstuff` inverts [`stuff`] for every body, and the twin checks that corncobs (the encoder of
 /// the robust frames) writes exactly [`stuff`]'s frame: together, every robust frame sent decodes
 /// to the body it was made of.
 pub(crate) fn check_unstuff_inverts_stuff(src: &mut impl Source) {
@@ -421,12 +460,21 @@ pub(crate) fn check_unstuff_inverts_stuff(src: &mut impl Source) {
     }
     let frame = stuff(&body);
     let mut out = [0u8; BODY];
-    assert_eq!(unstuff(&frame, &mut out), Some(BODY));
-    assert!(out == body);
+    assert!(
+        unstuff(&frame, &mut out) == Some(BODY),
+        "P-6: unstuffing a stuffed body gives a body of the body length"
+    );
+    assert!(out == body, "P-6: unstuff gives back the body stuffed");
     if !cfg!(kani) {
         let mut reference = [0u8; FRAME];
-        assert_eq!(corncobs::encode_buf(&body, &mut reference), FRAME);
-        assert!(reference == frame);
+        assert!(
+            corncobs::encode_buf(&body, &mut reference) == FRAME,
+            "P-6: corncobs' encoder writes a frame of the frame length"
+        );
+        assert!(
+            reference == frame,
+            "P-6: corncobs' encoder writes the specification's frame"
+        );
     }
     cover!(src, body.iter().all(|&b| b != 0), "no zero in the body");
     cover!(
@@ -436,7 +484,7 @@ pub(crate) fn check_unstuff_inverts_stuff(src: &mut impl Source) {
     );
 }
 
-/// `unstuff` never panics on any input of any length up to one byte past a frame, decodes a frame
+/// P-4: `unstuff` never panics on any input of any length up to one byte past a frame, decodes a frame
 /// of `n` bytes to `n − 2`, accepts only the frame length's frames that [`stuff`] makes (so each
 /// body has exactly one frame, and a changed frame either decodes to a changed body or is
 /// refused), and, in the twin, agrees with corncobs' decoder.
@@ -457,9 +505,15 @@ pub(crate) fn check_unstuff_total(src: &mut impl Source) {
     let mut out = [0u8; BODY];
     let r = unstuff(frame, &mut out);
     if let Some(len) = r {
-        assert_eq!(len + 2, n);
+        assert!(
+            len + 2 == n,
+            "P-4: an accepted frame of n bytes decodes to n - 2 bytes"
+        );
         if n == FRAME {
-            assert!(stuff(&out)[..] == *frame);
+            assert!(
+                stuff(&out)[..] == *frame,
+                "P-4: unstuff accepts only frames stuff_into makes"
+            );
         }
     }
     if !cfg!(kani) {
@@ -471,9 +525,15 @@ pub(crate) fn check_unstuff_total(src: &mut impl Source) {
             Ok(len) if one_zero && len + 2 == n => Some(len),
             _ => None,
         };
-        assert_eq!(accepted, r);
+        assert!(
+            accepted == r,
+            "P-4: unstuff accepts exactly the frames corncobs' decoder accepts"
+        );
         if let Some(len) = r {
-            assert!(reference[..len] == out[..len]);
+            assert!(
+                reference[..len] == out[..len],
+                "P-4: unstuff decodes as corncobs' decoder does"
+            );
         }
     }
     cover!(src, r.is_some(), "frame accepted");
@@ -489,12 +549,18 @@ pub(crate) fn check_unstuff_total(src: &mut impl Source) {
     );
 }
 
-/// encode → decode of the legacy packet gives back the same command (no CRC on this path).
+/// P-6: encode → decode of the legacy packet gives back the same command (no CRC on this path).
 pub(crate) fn check_legacy_round_trip(src: &mut impl Source) {
     let m = any_msg(src);
     let mut buf = [0u8; Msg::LEGACY_LEN];
-    assert_eq!(m.encode_legacy(&mut buf), Some(Msg::LEGACY_LEN));
-    assert!(Msg::decode_legacy(&buf) == Ok(m));
+    assert!(
+        m.encode_legacy(&mut buf) == Some(Msg::LEGACY_LEN),
+        "P-6: the legacy packet has the legacy length"
+    );
+    assert!(
+        Msg::decode_legacy(&buf) == Ok(m),
+        "P-6: the legacy packet decodes to the message sent"
+    );
     cover!(src, m.cmd_type == CmdType::Mtrs, "motor command");
 }
 
