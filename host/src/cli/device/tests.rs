@@ -163,7 +163,10 @@ fn a_drive_without_any_reply_is_no_reply() {
     let sent = end["frames_sent"].as_u64().unwrap();
     let skipped = end["pacing"]["skipped"].as_u64().unwrap();
     assert!(sent <= 10, "at most the planned frames: {sent}");
-    assert!(sent + skipped >= 10, "every planned frame sent or its deadline counted skipped");
+    assert!(
+        sent + skipped >= 10,
+        "every planned frame sent or its deadline counted skipped"
+    );
 }
 
 #[test]
