@@ -393,19 +393,49 @@ fn exact<const L: usize>(bytes: &[u8], what: &str, hint: &str) -> Result<[u8; L]
         .map_err(|_| format!("{what} is exactly {L} bytes, got {}; {hint}", bytes.len()))
 }
 
-/// Decodes `hex` as a frame of `kind` and returns pretty JSON (see [`SHAPES`]).
+/// What [`decode_report`] found: the JSON to print, and for a capture that yielded no frame at all
+/// (only refused frames, garbage or an incomplete tail) the reason, which fails the run.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct Decoded {
+    /// Pretty JSON (see [`SHAPES`]).
+    pub json: String,
+    /// `Some(why)` when the bytes were a capture and not one frame in it decoded.
+    pub no_frame: Option<String>,
+}
+
+/// Decodes `hex` as a frame of `kind` and returns pretty JSON (see [`SHAPES`]). A capture without
+/// a single decoded frame still returns its JSON here; [`decode_report`] says it found none.
 pub fn decode(kind: FrameKind, hex: &str, motors: usize) -> Result<String, String> {
+    decode_report(kind, hex, motors).map(|d| d.json)
+}
+
+/// [`decode`], telling a capture that yielded frames from one that yielded none.
+pub fn decode_report(kind: FrameKind, hex: &str, motors: usize) -> Result<Decoded, String> {
     let bytes = parse_hex(hex)?;
+    let one = |r: Result<String, String>| {
+        r.map(|json| Decoded {
+            json,
+            no_frame: None,
+        })
+    };
     match kind {
         FrameKind::AmrCommand | FrameKind::AmrFeedback | FrameKind::AmrInfo => {
-            decode_amr(kind, &bytes)
+            one(decode_amr(kind, &bytes))
         }
         FrameKind::Cdc => decode_cdc(&bytes),
-        FrameKind::PiRx => decode_pi_rx(&bytes),
-        FrameKind::PiTx => decode_pi_tx(&bytes),
-        FrameKind::TeensyLegacy => with_motors!(motors, decode_teensy_legacy(&bytes)),
+        FrameKind::PiRx => one(decode_pi_rx(&bytes)),
+        FrameKind::PiTx => one(decode_pi_tx(&bytes)),
+        FrameKind::TeensyLegacy => one(with_motors!(motors, decode_teensy_legacy(&bytes))),
         FrameKind::TeensyRobust => with_motors!(motors, decode_teensy_robust(&bytes)),
     }
+}
+
+/// The reason a capture of `len` bytes yielded no frame: `refused` frames refused, `incomplete`
+/// bytes of an unfinished one at the end.
+fn no_frame(what: &str, len: usize, refused: u64, incomplete: usize) -> String {
+    format!(
+        "no frame decoded: the {len}-byte capture holds no valid {what} frame ({refused} refused, {incomplete} bytes of an incomplete one at the end); check the link kind (--frame), --motors, and that the capture starts at a frame boundary"
+    )
 }
 
 /// Encodes the JSON message `json` as a frame of `kind` and returns it in hex.
@@ -563,9 +593,14 @@ struct Capture<M: Serialize, S: Serialize> {
     incomplete_bytes: usize,
 }
 
-fn decode_cdc(bytes: &[u8]) -> Result<String, String> {
+fn decode_cdc(bytes: &[u8]) -> Result<Decoded, String> {
     match cdc::decode_frame(bytes) {
-        Ok(m) => return pretty(&CdcJson::from(m)),
+        Ok(m) => {
+            return Ok(Decoded {
+                json: pretty(&CdcJson::from(m))?,
+                no_frame: None,
+            })
+        }
         Err(cdc::Error::Framing) => {}
         Err(e) => return Err(cdc_error_detail(e, bytes)),
     }
@@ -593,10 +628,16 @@ fn decode_cdc(bytes: &[u8]) -> Result<String, String> {
             ),
         ));
     }
-    pretty(&Capture {
-        results,
-        stats: dec.stats(),
-        incomplete_bytes: dec.buffered(),
+    let stats = dec.stats();
+    let refused = stats.crc_errors.saturating_add(stats.message_errors);
+    Ok(Decoded {
+        json: pretty(&Capture {
+            results,
+            stats,
+            incomplete_bytes: dec.buffered(),
+        })?,
+        no_frame: (stats.frames == 0)
+            .then(|| no_frame("USB CDC", bytes.len(), u64::from(refused), dec.buffered())),
     })
 }
 
@@ -760,7 +801,7 @@ fn robust_error<const N: usize>(frame: &[u8], reason: RejectReason) -> String {
     refused(reason, &detail)
 }
 
-fn decode_teensy_robust<const N: usize>(bytes: &[u8]) -> Result<String, String> {
+fn decode_teensy_robust<const N: usize>(bytes: &[u8]) -> Result<Decoded, String> {
     let zeros = bytes.iter().filter(|&&b| b == 0).count();
     if zeros == 0 {
         return Err(refused(
@@ -771,7 +812,10 @@ fn decode_teensy_robust<const N: usize>(bytes: &[u8]) -> Result<String, String> 
     if zeros == 1 && bytes.last() == Some(&0) {
         let m =
             teensy::CmdMsg::<N>::decode_robust(bytes).map_err(|r| robust_error::<N>(bytes, r))?;
-        return pretty(&CmdMsgJson::from(&m));
+        return Ok(Decoded {
+            json: pretty(&CmdMsgJson::from(&m))?,
+            no_frame: None,
+        });
     }
     // Several frames, or garbage: a capture.
     let mut dec = teensy::RobustDecoder::<N>::new();
@@ -789,10 +833,15 @@ fn decode_teensy_robust<const N: usize>(bytes: &[u8]) -> Result<String, String> 
         })
         .collect();
     let tail = bytes.iter().rev().take_while(|&&b| b != 0).count();
-    pretty(&Capture {
-        results,
-        stats: dec.stats(),
-        incomplete_bytes: tail,
+    let stats = dec.stats();
+    Ok(Decoded {
+        json: pretty(&Capture {
+            results,
+            stats,
+            incomplete_bytes: tail,
+        })?,
+        no_frame: (stats.frames == 0)
+            .then(|| no_frame("Teensy serial", bytes.len(), u64::from(stats.errors), tail)),
     })
 }
 

@@ -1018,10 +1018,15 @@ fn main() -> ExitCode {
                 })
             }
         }
-        Cmd::Decode { frame, hex, motors } => cli::decode(frame, &hex, motors).map(|s| {
-            out!("{s}");
-            0
-        }),
+        Cmd::Decode { frame, hex, motors } => {
+            cli::decode_report(frame, &hex, motors).and_then(|d| {
+                out!("{}", d.json);
+                match d.no_frame {
+                    None => Ok(0),
+                    Some(why) => Err(why),
+                }
+            })
+        }
         Cmd::Encode {
             frame,
             json,

