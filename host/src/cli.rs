@@ -364,6 +364,54 @@ pub fn from_json<T: serde::de::DeserializeOwned>(json: &str) -> Result<T, String
     Ok(v)
 }
 
+/// [`from_json`] for a message with floating-point fields: a number that is not finite once
+/// converted to the field's type (1e40 in an `f32` becomes +Inf) is refused, naming the field, since
+/// a frame must never carry an infinity (the decoders and the board's validation refuse them).
+pub fn from_json_finite<T: serde::de::DeserializeOwned + Serialize>(
+    json: &str,
+) -> Result<T, String> {
+    let v: T = from_json(json)?;
+    let given: serde_json::Value = from_json(json)?;
+    // The value printed back: a non-finite float prints as null where the input held a number.
+    let back = serde_json::to_value(&v).map_err(|e| format!("cannot check the numbers: {e}"))?;
+    match lost_number(&given, &back, String::new()) {
+        None => Ok(v),
+        Some((path, n)) => Err(format!(
+            "field `{path}`: {n} is not finite as a 32-bit float (the largest magnitude is {:e}); a frame cannot carry an infinity, give a finite value",
+            f32::MAX
+        )),
+    }
+}
+
+/// The first path where `given` holds a number and `back` holds null, with that number.
+fn lost_number(
+    given: &serde_json::Value,
+    back: &serde_json::Value,
+    path: String,
+) -> Option<(String, String)> {
+    use serde_json::Value;
+    let join = |key: &str| {
+        if path.is_empty() {
+            key.to_string()
+        } else {
+            format!("{path}.{key}")
+        }
+    };
+    match (given, back) {
+        (Value::Number(n), Value::Null) => Some((path.clone(), n.to_string())),
+        (Value::Object(g), Value::Object(b)) => g.iter().find_map(|(k, gv)| {
+            b.get(k)
+                .and_then(|bv| lost_number(gv, bv, join(k.as_str())))
+        }),
+        (Value::Array(g), Value::Array(b)) => g
+            .iter()
+            .zip(b)
+            .enumerate()
+            .find_map(|(i, (gv, bv))| lost_number(gv, bv, format!("{path}[{i}]"))),
+        _ => None,
+    }
+}
+
 fn pretty<T: Serialize>(v: &T) -> Result<String, String> {
     serde_json::to_string_pretty(v).map_err(|e| format!("cannot print JSON: {e}"))
 }
@@ -442,19 +490,19 @@ fn no_frame(what: &str, len: usize, refused: u64, incomplete: usize) -> String {
 pub fn encode(kind: FrameKind, json: &str, motors: usize) -> Result<String, String> {
     match kind {
         FrameKind::AmrCommand => {
-            let c: amr::MotorCommand = from_json(json)?;
+            let c: amr::MotorCommand = from_json_finite(json)?;
             let mut out = [0u8; amr::FRAME_LEN];
             amr::encode_command(&c, &mut out);
             Ok(to_hex(&out))
         }
         FrameKind::AmrFeedback => {
-            let f: amr::MotorFeedback = from_json(json)?;
+            let f: amr::MotorFeedback = from_json_finite(json)?;
             let mut out = [0u8; amr::FRAME_LEN];
             amr::encode_feedback(&f, &mut out);
             Ok(to_hex(&out))
         }
         FrameKind::AmrInfo => {
-            let i: amr::McuInfo = from_json(json)?;
+            let i: amr::McuInfo = from_json_finite(json)?;
             let mut out = [0u8; amr::FRAME_LEN];
             amr::encode_info(&i, &mut out);
             Ok(to_hex(&out))
@@ -466,13 +514,13 @@ pub fn encode(kind: FrameKind, json: &str, motors: usize) -> Result<String, Stri
             Ok(to_hex(out.get(..n).unwrap_or(&[])))
         }
         FrameKind::PiRx => {
-            let rx: pi_spi::RxBuffer = from_json(json)?;
+            let rx: pi_spi::RxBuffer = from_json_finite(json)?;
             let mut out = [0u8; pi_spi::RX_LEN];
             pi_spi::encode_rx(&rx, &mut out);
             Ok(to_hex(&out))
         }
         FrameKind::PiTx => {
-            let tx: pi_spi::TxBuffer = from_json(json)?;
+            let tx: pi_spi::TxBuffer = from_json_finite(json)?;
             let mut out = [0u8; pi_spi::TX_LEN];
             pi_spi::encode_tx(&tx, &mut out);
             Ok(to_hex(&out))

@@ -85,3 +85,26 @@ fn a_teensy_capture_without_a_frame_exits_non_zero_and_says_so() {
     assert_ne!(code, 0);
     assert!(err.contains("no frame"), "stderr: {err}");
 }
+
+#[test]
+fn encode_refuses_numbers_beyond_f32() {
+    // 1e40 is finite as f64 but above f32::MAX (3.4e38): it would become +Inf on the wire.
+    for (kind, json) in [
+        ("amr-command", r#"{"left_speed_cmd":1e40}"#),
+        ("amr-feedback", r#"{"right_current":-1e39}"#),
+        ("pi-tx", r#"{"imu":{"heading":1e300}}"#),
+    ] {
+        let (code, out, err) = motorlink(&["encode", "--frame", kind, json]);
+        assert_ne!(code, 0, "{kind} {json} encoded to {out}");
+        assert!(out.is_empty(), "nothing may be printed: {out}");
+        assert!(err.contains("finite"), "{kind}: {err}");
+    }
+    // The largest f32 itself is fine.
+    let (code, _, err) = motorlink(&[
+        "encode",
+        "--frame",
+        "amr-command",
+        r#"{"left_speed_cmd":3.4028235e38}"#,
+    ]);
+    assert_eq!(code, 0, "{err}");
+}
