@@ -280,7 +280,9 @@ impl CmdMsgJson {
     }
 }
 
-/// Calls `$f::<N>(args)` for the runtime motor count `$n` (1 ..= [`teensy::MAX_MOTORS`]).
+/// Calls `$f::<N>(args)` for the runtime motor count `$n` (1 ..= [`teensy::MAX_MOTORS`]); any other
+/// count is an `Err` naming the range, returned before `$f` runs.
+#[macro_export]
 macro_rules! with_motors {
     ($n:expr, $f:ident ( $($arg:expr),* )) => {
         match $n {
@@ -302,7 +304,7 @@ macro_rules! with_motors {
             16 => $f::<16>($($arg),*),
             other => Err(format!(
                 "--motors {other} is not supported; give 1 to {} (protocol::teensy::MAX_MOTORS)",
-                teensy::MAX_MOTORS
+                ::protocol::teensy::MAX_MOTORS
             )),
         }
     };

@@ -187,7 +187,7 @@ enum Cmd {
         /// Stop after this many transfers instead of --seconds (--kind pi-spi).
         #[arg(long)]
         count: Option<u64>,
-        /// Motors in a seed 003 CmdMsg (--kind teensy).
+        /// Joints in a Teensy serial link's CmdMsg (--kind teensy), 1 to 16 (MAX_SUPPORTED_MTRS).
         #[arg(long, default_value_t = cli::DEFAULT_MOTORS)]
         motors: usize,
     },
@@ -660,15 +660,7 @@ fn monitor_other(
         Kind::Spi | Kind::PiSpi => {}
         Kind::Serial => return monitor_cdc(device, speed, seconds),
         Kind::Teensy => {
-            return match motors {
-                1 => monitor_teensy::<1>(device, speed, seconds),
-                2 => monitor_teensy::<2>(device, speed, seconds),
-                3 => monitor_teensy::<3>(device, speed, seconds),
-                4 => monitor_teensy::<4>(device, speed, seconds),
-                6 => monitor_teensy::<6>(device, speed, seconds),
-                8 => monitor_teensy::<8>(device, speed, seconds),
-                n => Err(format!("--motors {n}: monitor supports 1, 2, 3, 4, 6, 8")),
-            }
+            return motorlink::with_motors!(motors, monitor_teensy(device, speed, seconds));
         }
     }
     let t = open_spi(device, speed)?;

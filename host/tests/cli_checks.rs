@@ -108,3 +108,29 @@ fn encode_refuses_numbers_beyond_f32() {
     ]);
     assert_eq!(code, 0, "{err}");
 }
+
+#[test]
+fn teensy_motor_counts_follow_the_help() {
+    let (_, help, _) = motorlink(&["monitor", "--help"]);
+    assert!(help.contains("1 to 16"), "{help}");
+    // 5 joints is in the range the help gives: refused only because the device does not exist.
+    let dev = "/nonexistent/ttyACM9";
+    let (code, _, err) = motorlink(&[
+        "monitor",
+        dev,
+        "--kind",
+        "teensy",
+        "--motors",
+        "5",
+        "--seconds",
+        "0.1",
+    ]);
+    assert_ne!(code, 0);
+    assert!(err.contains(dev), "{err}");
+    assert!(!err.contains("monitor supports"), "{err}");
+    // 17 is beyond the protocol's limit: refused before the device is opened, naming the range.
+    let (code, _, err) = motorlink(&["monitor", dev, "--kind", "teensy", "--motors", "17"]);
+    assert_ne!(code, 0);
+    assert!(err.contains("1 to 16"), "{err}");
+    assert!(!err.contains(dev), "{err}");
+}
