@@ -144,7 +144,8 @@ enum Cmd {
         /// Frame type.
         #[arg(long, value_enum)]
         frame: FrameKind,
-        /// The bytes in hex (e.g. from a logic-analyser capture).
+        /// The bytes in hex (e.g. from a logic-analyser capture); `-` reads them from standard
+        /// input (any number of lines; spaces, ':' and ',' allowed).
         hex: String,
         /// Motors in a seed 003 CmdMsg (MAX_SUPPORTED_MTRS), 1 to 16.
         #[arg(long, default_value_t = cli::DEFAULT_MOTORS)]
@@ -434,8 +435,8 @@ enum Cmd {
     },
     /// Measure the 1 kHz loop's period and deadline misses on this machine (no device needed).
     LoopBench {
-        /// How long, s.
-        #[arg(long, default_value_t = 60.0)]
+        /// How long, s (above 0).
+        #[arg(long, default_value_t = 60.0, allow_negative_numbers = true)]
         seconds: f64,
     },
 }
@@ -958,7 +959,27 @@ fn info(
     Ok(())
 }
 
+/// The hex argument of `decode`: as given, or `-` for everything on standard input.
+fn hex_argument(hex: String) -> Result<String, String> {
+    if hex != "-" {
+        return Ok(hex);
+    }
+    let mut text = String::new();
+    std::io::Read::read_to_string(&mut std::io::stdin().lock(), &mut text)
+        .map_err(|e| format!("cannot read the hex from standard input: {e}"))?;
+    if text.trim().is_empty() {
+        return Err("standard input held no hex digits; pipe the bytes in hex, e.g. `echo aa55... | motorlink decode --frame cdc -`".into());
+    }
+    Ok(text)
+}
+
 fn loop_bench(seconds: f64) -> Result<(), String> {
+    if !(seconds.is_finite() && seconds > 0.0 && seconds <= device::MAX_SECONDS) {
+        return Err(format!(
+            "--seconds {seconds}: give a duration above 0 and at most {} s",
+            device::MAX_SECONDS
+        ));
+    }
     // The same work as on the robot (IK, encode, decode, checks), against a device that answers
     // a valid feedback frame instantly.
     let mut reply = [0u8; FRAME_LEN];
@@ -1010,15 +1031,15 @@ fn main() -> ExitCode {
                 })
             }
         }
-        Cmd::Decode { frame, hex, motors } => {
-            cli::decode_report(frame, &hex, motors).and_then(|d| {
+        Cmd::Decode { frame, hex, motors } => hex_argument(hex)
+            .and_then(|hex| cli::decode_report(frame, &hex, motors))
+            .and_then(|d| {
                 out!("{}", d.json);
                 match d.no_frame {
                     None => Ok(0),
                     Some(why) => Err(why),
                 }
-            })
-        }
+            }),
         Cmd::Encode {
             frame,
             json,

@@ -134,3 +134,33 @@ fn teensy_motor_counts_follow_the_help() {
     assert!(err.contains("1 to 16"), "{err}");
     assert!(!err.contains(dev), "{err}");
 }
+
+#[test]
+fn loop_bench_refuses_a_zero_or_non_finite_duration() {
+    for s in ["0", "-1", "NaN", "inf"] {
+        let (code, out, err) = motorlink(&["loop-bench", "--seconds", s]);
+        assert_ne!(code, 0, "--seconds {s}: {out}");
+        assert!(!out.contains("NaN") && !out.contains("inf"), "{out}");
+        assert!(err.contains("--seconds"), "{err}");
+    }
+}
+
+#[test]
+fn decode_dash_reads_standard_input() {
+    let hex = cdc_hex(r#"{"type":"estop","action":"engage"}"#);
+    let (code, out, err) = run(
+        &["decode", "--frame", "cdc", "-"],
+        Some(&format!("{hex}\n")),
+    );
+    assert_eq!(code, 0, "{err}");
+    assert!(out.contains("\"engage\""), "{out}");
+    // A capture over several lines, as a logic analyser exports it.
+    let ping = cdc_hex(r#"{"type":"ping"}"#);
+    let text = format!("{hex}\n{ping}\n");
+    let (code, out, err) = run(&["decode", "--frame", "cdc", "-"], Some(&text));
+    assert_eq!(code, 0, "{err}");
+    assert!(
+        out.contains("\"ping\"") && out.contains("\"engage\""),
+        "{out}"
+    );
+}
