@@ -12,6 +12,7 @@ use serde::{Deserialize, Serialize};
 use statemachine::{Estop, RejectReason};
 
 pub mod device;
+pub mod exit;
 pub mod info;
 pub mod pi;
 

@@ -23,6 +23,7 @@ macro_rules! out {
 use clap::{Args, Parser, Subcommand, ValueEnum};
 use motorlink::bridge::{Bridge, BridgeConfig};
 use motorlink::cli::device::{self, CdcVerb, DrivePlan, MovePlan, SendHex, TeensyVerb};
+use motorlink::cli::exit::{Exit, Failure, OrExit, Run};
 use motorlink::cli::pi;
 use motorlink::cli::{self, FrameKind};
 use motorlink::link::Link;
@@ -41,6 +42,7 @@ use statemachine::Estop;
 #[command(
     name = "motorlink",
     version,
+    after_help = motorlink::cli::exit::TABLE,
     about = "Host side of the AMR motor controller: simulator, frame tools, device monitor, serial board verbs, and the Raspberry Pi SPI verbs of seed 004 (ping, monitor, drive --kind pi-spi)"
 )]
 struct Cli {
@@ -111,10 +113,12 @@ started): every frame received ({\"message\":{..}}; a refused frame: {\"error\":
 {\"reason\":..}), and as the last line the result, with \"verdict\": \"done\" | \"refused\" | \"no_reply\".
 
 Exit status:
-  0  done: the board answered and did it (ACK result 0, echo cmd_success 1, replies came)
-  1  refused by the board (ACK result != 0, echo cmd_success 0)
-  2  error: bad argument (nothing is sent), the device cannot be opened, an I/O error
-  3  no reply within --wait-ms
+  0   done: the board answered and did it (ACK result 0, echo cmd_success 1, replies came)
+  1   refused by the board (ACK result != 0, echo cmd_success 0)
+  64  bad argument (checked before the device is opened: nothing is sent)
+  69  the device cannot be opened, or no reply within --wait-ms
+  74  I/O error during the run
+  (the whole table: motorlink --help)
 
 The device is opened exclusively in raw mode; bytes that arrived before the open are dropped, so
 each run sees only replies to itself. Several runs in sequence on one pty (QEMU -serial pty) work.";
@@ -199,7 +203,7 @@ enum Cmd {
     /// ENDEFF_OFF, answered by its echo (seed 003 has no probe message; switching the end effector
     /// off is the safe, idempotent round trip, but it does switch it off). Serial kinds print JSON
     /// lines: {"ping":i,"round_trip_us":..,"reply":{..}} or {"ping":i,"no_reply_ms":..}, then the
-    /// verdict with the round-trip statistics; exit status 3 if nothing answered.
+    /// verdict with the round-trip statistics; exit status 69 if nothing answered.
     ///
     /// --kind pi-spi: at least two transfers, 10 ms apart, of a buffer the board answers but
     /// ignores (every byte 0: transferVersion 0), so a ping never changes what the robot does. Lines
@@ -261,7 +265,7 @@ enum Cmd {
     ///
     /// --enable: MOTOR_ENABLE 1 right after the first frame, its ACK awaited while the frames keep
     /// coming (the board keeps a re-arm only until the first frame, at most 249 ms); refused: stop sending, exit 1;
-    /// no ACK within --wait-ms: stop sending, exit 3.
+    /// no ACK within --wait-ms: stop sending, exit 69.
     ///
     /// First line {"sending":{..},"frames":..,"hz":..,"enable":..}; last line {"verdict":..,
     /// "frames_sent":..,"enable":{"reply":..,"round_trip_us":..}|null,"received":{"status":..,
@@ -275,13 +279,13 @@ enum Cmd {
     /// --servo-modes, --servo-pos; shutdown bits clear: the bit's 1->0 edge is the board's re-arm)
     /// at --hz (default 100) for --seconds, then one buffer with both shutdown bits set and every
     /// motor OFF; that last buffer is also sent on Ctrl-C (SIGINT, SIGTERM, SIGHUP) and after a
-    /// failed transfer. Arguments are checked before the device is opened (exit 2): an enabled
+    /// failed transfer. Arguments are checked before the device is opened (exit 64): an enabled
     /// servo's position must be 600..=2600, a pwm duty within +-399, --hz above 20.4 (the board
     /// brakes 49 ms after the last valid transfer). Lines: {"sending":{..},..}, then
     /// {"transfer":k,"tx":{..}} (every --every-th) or {"transfer":k,"error":..}, last
     /// {"verdict":..,"transfers":{"arm","command","shutdown"},"commanded":[..],"moved":[..],
     /// "decoded":..,"errors":..,"update_time":{..},"stale":..,"pacing":{..},"interrupted":..}.
-    /// Verdict: no_reply (exit 3) if update_time never advanced (no TxBuffer decoded, or a stale
+    /// Verdict: no_reply (exit 69) if update_time never advanced (no TxBuffer decoded, or a stale
     /// board); refused (exit 1) if commands ran for 0.2 s or more, some motor was commanded to move
     /// and none of those changed motor.position; done (exit 0) otherwise.
     #[command(after_long_help = VERB_HELP)]
@@ -311,7 +315,7 @@ enum Cmd {
     /// Seed 003: MTRS to absolute angles at a fixed rate (or once), checking every echo.
     ///
     /// Every echo must come back with cmd_success 1: a refusal stops the sending at once (exit 1),
-    /// an echo missing --wait-ms after its command stops it too (exit 3). cmd_success 1 means the
+    /// an echo missing --wait-ms after its command stops it too (exit 69). cmd_success 1 means the
     /// board took the command; the arm moves only once re-armed (--cal, or an earlier `cal` with
     /// MTRS frames kept fresh) and only while frames keep coming (it holds, then brakes, within
     /// 250 ms of the last).
@@ -413,8 +417,8 @@ enum Cmd {
     /// --capture FILE reads a binary file of concatenated 64-byte MISO frames (one per CS-low period,
     /// as a logic analyser or spidev records them) and prints every McuInfo frame in it. --device
     /// asks the MCU: it sends commands with request = 1 and the drive disabled (enable 0, speeds 0,
-    /// mode 0), one per millisecond, until an McuInfo comes back or --timeout-ms passes. Exit status
-    /// 2 with the reason if none is found.
+    /// mode 0), one per millisecond, until an McuInfo comes back or --timeout-ms passes. None found:
+    /// exit status 65 (capture; 66 if the file cannot be read) or 69 (device), with the reason.
     #[command(group(clap::ArgGroup::new("source").required(true).args(["capture", "device"])))]
     Info {
         /// Binary capture of feedback-slot frames (MISO), 64 bytes each, starting at a frame boundary.
@@ -446,21 +450,34 @@ fn secs(s: f64) -> Duration {
     Duration::try_from_secs_f64(s.max(0.0)).unwrap_or(Duration::from_secs(365 * 24 * 3600))
 }
 
-fn load_scenarios(args: &[String]) -> Result<Vec<Scenario>, String> {
+/// A scenario error with its exit status: a file that cannot be read is missing input, the rest
+/// is refused data.
+fn scenario_failure(e: &scenario::ScenarioError) -> Failure {
+    let exit = match e {
+        scenario::ScenarioError::Io(..) => Exit::NoInput,
+        _ => Exit::DataRefused,
+    };
+    Failure::new(exit, e.to_string())
+}
+
+fn load_scenarios(args: &[String]) -> Result<Vec<Scenario>, Failure> {
     if args.is_empty() {
-        return scenario::builtin().map_err(|e| e.to_string());
+        return scenario::builtin().map_err(|e| scenario_failure(&e));
     }
     args.iter()
         .map(|a| {
             if let Some((_, text)) = scenario::BUILTIN.iter().find(|(n, _)| n == a) {
-                Scenario::from_toml(text, a).map_err(|e| e.to_string())
+                Scenario::from_toml(text, a).map_err(|e| scenario_failure(&e))
             } else if Path::new(a).exists() {
-                Scenario::load(Path::new(a)).map_err(|e| e.to_string())
+                Scenario::load(Path::new(a)).map_err(|e| scenario_failure(&e))
             } else {
                 let names: Vec<&str> = scenario::BUILTIN.iter().map(|(n, _)| *n).collect();
-                Err(format!(
-                    "'{a}' is neither a scenario file nor a built-in scenario ({})",
-                    names.join(", ")
+                Err(Failure::new(
+                    Exit::NoInput,
+                    format!(
+                        "'{a}' is neither a scenario file nor a built-in scenario ({})",
+                        names.join(", ")
+                    ),
                 ))
             }
         })
@@ -472,18 +489,23 @@ fn run_sim(
     out: &Path,
     duration: Option<f64>,
     plots: bool,
-) -> Result<bool, String> {
-    let mut scenarios = load_scenarios(args)?;
+) -> Result<bool, Failure> {
     if let Some(d) = duration {
         if !(d.is_finite() && d > 0.0) {
-            return Err("--duration must be a positive number of seconds".into());
+            return Err(Failure::usage(
+                "--duration must be a positive number of seconds",
+            ));
         }
+    }
+    let mut scenarios = load_scenarios(args)?;
+    if let Some(d) = duration {
         for s in &mut scenarios {
             s.duration_s = d;
         }
     }
     std::fs::create_dir_all(out)
-        .map_err(|e| format!("cannot create {}: {e}; choose another --out", out.display()))?;
+        .map_err(|e| format!("cannot create {}: {e}; choose another --out", out.display()))
+        .or_exit(Exit::Io)?;
     let mut results = Vec::new();
     for sc in &scenarios {
         eprintln!(
@@ -492,7 +514,8 @@ fn run_sim(
         );
         let trace_path = out.join(format!("{}.csv", sc.name));
         let file = std::fs::File::create(&trace_path)
-            .map_err(|e| format!("cannot write {}: {e}", trace_path.display()))?;
+            .map_err(|e| format!("cannot write {}: {e}", trace_path.display()))
+            .or_exit(Exit::Io)?;
         let mut w = std::io::BufWriter::new(file);
         let mut host = SimHost::new();
         let opts = sim::RunOptions {
@@ -500,7 +523,8 @@ fn run_sim(
             keep_series: plots,
         };
         let r = sim::run(sc, &mut host, opts, Some(&mut w))
-            .map_err(|e| format!("writing {}: {e}", trace_path.display()))?;
+            .map_err(|e| format!("writing {}: {e}", trace_path.display()))
+            .or_exit(Exit::Io)?;
         if plots {
             let svg = out.join(format!("{}.svg", sc.name));
             report::plot(
@@ -508,7 +532,8 @@ fn run_sim(
                 &format!("{}: {}", sc.name, short(&sc.description)),
                 &r,
             )
-            .map_err(|e| format!("plot {}: {e}", svg.display()))?;
+            .map_err(|e| format!("plot {}: {e}", svg.display()))
+            .or_exit(Exit::Io)?;
         }
         let failures = r.summary.check(sc);
         results.push((r.summary, failures));
@@ -517,7 +542,9 @@ fn run_sim(
     print!("{table}");
     let write = |name: &str, text: &str| {
         let p = out.join(name);
-        std::fs::write(&p, text).map_err(|e| format!("cannot write {}: {e}", p.display()))
+        std::fs::write(&p, text)
+            .map_err(|e| format!("cannot write {}: {e}", p.display()))
+            .or_exit(Exit::Io)
     };
     write("summary.txt", &table)?;
     write("summary.csv", &report::csv(&results))?;
@@ -533,14 +560,14 @@ fn short(s: &str) -> String {
     first.chars().take(90).collect()
 }
 
-fn open_spi(device: &str, speed: u32) -> Result<Box<dyn Transport>, String> {
+fn open_spi(device: &str, speed: u32) -> Result<Box<dyn Transport>, Failure> {
     Ok(Box::new(
-        SpiTransport::open(device, speed).map_err(|e| e.to_string())?,
+        SpiTransport::open(device, speed).or_exit(Exit::Unavailable)?,
     ))
 }
 
-fn open_serial(device: &str, baud: u32) -> Result<SerialTransport, String> {
-    SerialTransport::open(device, baud, Duration::from_millis(20)).map_err(|e| e.to_string())
+fn open_serial(device: &str, baud: u32) -> Result<SerialTransport, Failure> {
+    SerialTransport::open(device, baud, Duration::from_millis(20)).or_exit(Exit::Unavailable)
 }
 
 fn elapsed_ms(t0: Instant) -> u64 {
@@ -548,17 +575,17 @@ fn elapsed_ms(t0: Instant) -> u64 {
 }
 
 /// Seed 001: PING every 100 ms, print every received message with the ladder event it maps to.
-fn monitor_cdc(device: &str, baud: u32, seconds: f64) -> Result<(), String> {
+fn monitor_cdc(device: &str, baud: u32, seconds: f64) -> Run {
     let mut link = CdcLink::new(open_serial(device, baud)?);
     let t0 = Instant::now();
     let end = t0.checked_add(secs(seconds)).unwrap_or(t0);
     let mut last_ping: Option<Instant> = None;
     while Instant::now() < end {
         if last_ping.is_none_or(|t| t.elapsed() >= Duration::from_millis(100)) {
-            link.send(&cdc::Message::Ping).map_err(|e| e.to_string())?;
+            link.send(&cdc::Message::Ping).or_exit(Exit::Io)?;
             last_ping = Some(Instant::now());
         }
-        for m in link.poll().map_err(|e| e.to_string())? {
+        for m in link.poll().or_exit(Exit::Io)? {
             let event = m.to_event().map(|e| format!("{e:?}"));
             out!(
                 "{}",
@@ -577,16 +604,21 @@ fn monitor_cdc(device: &str, baud: u32, seconds: f64) -> Result<(), String> {
         "{}",
         serde_json::json!({"device": device, "stats": link.stats()})
     );
-    Ok(())
+    Ok(Exit::Ok)
 }
 
-/// Seed 003: listen and print every robust frame received.
-fn monitor_teensy<const N: usize>(device: &str, baud: u32, seconds: f64) -> Result<(), String> {
+/// Seed 003: listen and print every robust frame received. (The outer `Result` is the motor count's,
+/// for `with_motors!`; it is checked before this runs.)
+fn monitor_teensy<const N: usize>(device: &str, baud: u32, seconds: f64) -> Result<Run, String> {
+    Ok(monitor_teensy_n::<N>(device, baud, seconds))
+}
+
+fn monitor_teensy_n<const N: usize>(device: &str, baud: u32, seconds: f64) -> Run {
     let mut link = TeensyLink::<_, N>::new(open_serial(device, baud)?);
     let t0 = Instant::now();
     let end = t0.checked_add(secs(seconds)).unwrap_or(t0);
     while Instant::now() < end {
-        for m in link.poll().map_err(|e| e.to_string())? {
+        for m in link.poll().or_exit(Exit::Io)? {
             out!(
                 "{}",
                 serde_json::json!({"t_ms": elapsed_ms(t0), "message": cli::CmdMsgJson::from(&m)})
@@ -603,7 +635,7 @@ fn monitor_teensy<const N: usize>(device: &str, baud: u32, seconds: f64) -> Resu
         "{}",
         serde_json::json!({"device": device, "stats": link.stats()})
     );
-    Ok(())
+    Ok(Exit::Ok)
 }
 
 struct Boxed(Box<dyn Transport>);
@@ -635,33 +667,57 @@ struct MonitorArgs<'a> {
     motors: usize,
 }
 
-fn monitor(a: &MonitorArgs<'_>) -> Result<u8, String> {
+/// `--motors`: 1 to the protocol's limit, checked before anything is opened.
+fn check_motors(motors: usize) -> Result<(), Failure> {
+    if (1..=protocol::teensy::MAX_MOTORS).contains(&motors) {
+        Ok(())
+    } else {
+        Err(Failure::usage(format!(
+            "--motors {motors} is not supported; give 1 to {} (protocol::teensy::MAX_MOTORS)",
+            protocol::teensy::MAX_MOTORS
+        )))
+    }
+}
+
+/// `--seconds` of a run: above 0, finite, at most a day.
+fn check_seconds(seconds: f64) -> Result<(), Failure> {
+    if seconds.is_finite() && seconds > 0.0 && seconds <= device::MAX_SECONDS {
+        Ok(())
+    } else {
+        Err(Failure::usage(format!(
+            "--seconds {seconds}: give a duration above 0 and at most {} s",
+            device::MAX_SECONDS
+        )))
+    }
+}
+
+fn monitor(a: &MonitorArgs<'_>) -> Run {
     let (device, kind, seconds, motors) = (a.device, a.kind, a.seconds, a.motors);
     let speed = a.speed.unwrap_or(default_speed(kind));
     if kind == Kind::PiSpi {
-        let plan = pi::MonitorPlan::new(a.hz.unwrap_or(pi::DEFAULT_HZ), seconds, a.count)?;
-        let mut dev = SpiTransport::open(device, speed).map_err(|e| e.to_string())?;
-        let v = with_stop(|stop, sink| pi::run_monitor(&mut dev, &plan, stop, sink))?;
-        return Ok(v.exit_code());
+        let plan = pi::MonitorPlan::new(a.hz.unwrap_or(pi::DEFAULT_HZ), seconds, a.count)
+            .or_exit(Exit::Usage)?;
+        let mut dev = SpiTransport::open(device, speed).or_exit(Exit::Unavailable)?;
+        let v = with_stop(|stop, sink| pi::run_monitor(&mut dev, &plan, stop, sink))
+            .or_exit(Exit::Io)?;
+        return Ok(v.into());
     }
     if a.hz.is_some() || a.count.is_some() {
-        return Err("--hz and --count are for --kind pi-spi".into());
+        return Err(Failure::usage("--hz and --count are for --kind pi-spi"));
     }
-    monitor_other(device, kind, speed, seconds, motors).map(|()| 0)
+    if kind == Kind::Teensy {
+        check_motors(motors)?;
+    }
+    monitor_other(device, kind, speed, seconds, motors)
 }
 
-fn monitor_other(
-    device: &str,
-    kind: Kind,
-    speed: u32,
-    seconds: f64,
-    motors: usize,
-) -> Result<(), String> {
+fn monitor_other(device: &str, kind: Kind, speed: u32, seconds: f64, motors: usize) -> Run {
     match kind {
         Kind::Spi | Kind::PiSpi => {}
         Kind::Serial => return monitor_cdc(device, speed, seconds),
         Kind::Teensy => {
-            return motorlink::with_motors!(motors, monitor_teensy(device, speed, seconds));
+            return motorlink::with_motors!(motors, monitor_teensy(device, speed, seconds))
+                .or_exit(Exit::Usage)?;
         }
     }
     let t = open_spi(device, speed)?;
@@ -674,7 +730,7 @@ fn monitor_other(
         .checked_add(secs(seconds))
         .unwrap_or_else(std::time::Instant::now);
     while std::time::Instant::now() < end {
-        let diags = link.cycle().map_err(|e| e.to_string())?;
+        let diags = link.cycle().or_exit(Exit::Io)?;
         for (t, d) in diags {
             out!("{}", serde_json::json!({"t_us": t, "diagnostic": d}));
         }
@@ -691,7 +747,7 @@ fn monitor_other(
         }
     }
     eprintln!("loop: {}", link.pacer.stats.summary());
-    Ok(())
+    Ok(Exit::Ok)
 }
 
 /// What `ping` was asked.
@@ -704,25 +760,29 @@ struct PingArgs<'a> {
     motors: usize,
 }
 
-fn ping(a: &PingArgs<'_>) -> Result<u8, String> {
+fn ping(a: &PingArgs<'_>) -> Run {
     let (device, count) = (a.device, a.count);
     let speed = a.speed.unwrap_or(default_speed(a.kind));
     match a.kind {
         Kind::Spi => {}
         Kind::PiSpi => {
-            let mut dev = SpiTransport::open(device, speed).map_err(|e| e.to_string())?;
-            return Ok(pi::run_ping(&mut dev, count, &mut print_line)?.exit_code());
+            let mut dev = SpiTransport::open(device, speed).or_exit(Exit::Unavailable)?;
+            let v = pi::run_ping(&mut dev, count, &mut print_line).or_exit(Exit::Io)?;
+            return Ok(v.into());
         }
         Kind::Serial => {
             let port = open_serial(device, speed)?;
-            let v = device::run_cdc(port, &CdcVerb::Ping { count }, a.wait, &mut print_line)?;
-            return Ok(v.exit_code());
+            let v = device::run_cdc(port, &CdcVerb::Ping { count }, a.wait, &mut print_line)
+                .or_exit(Exit::Io)?;
+            return Ok(v.into());
         }
         Kind::Teensy => {
+            check_motors(a.motors)?;
             let port = open_serial(device, speed)?;
             let verb = TeensyVerb::Ping { count };
-            let v = device::run_teensy(port, a.motors, &verb, a.wait, &mut print_line)?;
-            return Ok(v.exit_code());
+            let v = device::run_teensy(port, a.motors, &verb, a.wait, &mut print_line)
+                .or_exit(Exit::Io)?;
+            return Ok(v.into());
         }
     }
     let t = open_spi(device, speed)?;
@@ -751,11 +811,11 @@ fn ping(a: &PingArgs<'_>) -> Result<u8, String> {
         }
     }
     if ok == 0 {
-        return Err(format!(
+        return Err(Failure::new(Exit::Unavailable, format!(
             "no valid reply from {device} in {count} exchanges: check wiring, SPI mode 0, and that the firmware runs"
-        ));
+        )));
     }
-    Ok(0)
+    Ok(Exit::Ok)
 }
 
 /// Prints one JSON line of a board verb.
@@ -790,38 +850,52 @@ fn pi_drive(
     args: &pi::PiDriveArgs,
     hz: Option<f64>,
     seconds: f64,
-) -> Result<u8, String> {
+) -> Run {
     if pwm_given {
-        return Err("--pwm is the seed 001 drive's; for --kind pi-spi give --modes pwm --targets D (duty -399..=399); nothing was sent".into());
+        return Err(Failure::usage("--pwm is the seed 001 drive's; for --kind pi-spi give --modes pwm --targets D (duty -399..=399); nothing was sent"));
     }
     let speed = args.speed.unwrap_or(default_speed(Kind::PiSpi));
-    let open = || SpiTransport::open(&link.device, speed).map_err(|e| e.to_string());
     let hz = hz.unwrap_or(pi::DEFAULT_HZ);
-    let v = with_stop(|stop, sink| pi::drive(args, hz, seconds, open, stop, sink))?;
-    Ok(v.exit_code())
+    // The same check pi::drive makes before it opens the device: a bad argument is a usage error.
+    pi::PiDrivePlan::new(args, hz, seconds).or_exit(Exit::Usage)?;
+    let open_failed = std::cell::Cell::new(false);
+    let open = || {
+        SpiTransport::open(&link.device, speed).map_err(|e| {
+            open_failed.set(true);
+            e.to_string()
+        })
+    };
+    match with_stop(|stop, sink| pi::drive(args, hz, seconds, open, stop, sink)) {
+        Ok(v) => Ok(v.into()),
+        Err(e) if open_failed.get() => Err(Failure::new(Exit::Unavailable, e)),
+        Err(e) => Err(Failure::new(Exit::Io, e)),
+    }
 }
 
 /// Checks that a verb's `--kind` is the protocol it speaks.
-fn expect_kind(kind: Option<SerialKind>, want: SerialKind, instead: &str) -> Result<(), String> {
+fn expect_kind(kind: Option<SerialKind>, want: SerialKind, instead: &str) -> Result<(), Failure> {
     match kind {
-        Some(SerialKind::PiSpi) if want != SerialKind::PiSpi => Err(NOT_PI.into()),
-        Some(k) if k != want => Err(instead.to_string()),
+        Some(SerialKind::PiSpi) if want != SerialKind::PiSpi => Err(Failure::usage(NOT_PI)),
+        Some(k) if k != want => Err(Failure::usage(instead)),
         _ => Ok(()),
     }
 }
 
 /// Opens the device of a board verb and runs a seed 001 verb on it.
-fn cdc_verb(link: &SerialArgs, verb: &CdcVerb) -> Result<u8, String> {
+fn cdc_verb(link: &SerialArgs, verb: &CdcVerb) -> Run {
     let port = open_serial(&link.device, link.baud)?;
     let wait = Duration::from_millis(link.wait_ms);
-    Ok(device::run_cdc(port, verb, wait, &mut print_line)?.exit_code())
+    let v = device::run_cdc(port, verb, wait, &mut print_line).or_exit(Exit::Io)?;
+    Ok(v.into())
 }
 
 /// Opens the device of a board verb and runs a seed 003 verb on it.
-fn teensy_verb(link: &SerialArgs, motors: usize, verb: &TeensyVerb) -> Result<u8, String> {
+fn teensy_verb(link: &SerialArgs, motors: usize, verb: &TeensyVerb) -> Run {
+    check_motors(motors)?;
     let port = open_serial(&link.device, link.baud)?;
     let wait = Duration::from_millis(link.wait_ms);
-    Ok(device::run_teensy(port, motors, verb, wait, &mut print_line)?.exit_code())
+    let v = device::run_teensy(port, motors, verb, wait, &mut print_line).or_exit(Exit::Io)?;
+    Ok(v.into())
 }
 
 const NOT_TEENSY: &str =
@@ -832,7 +906,7 @@ const NOT_SERIAL: &str =
     "this verb speaks seed 003 (--kind teensy); for a seed 001 board use enable, estop, drive";
 
 /// Runs one of the board verbs (everything but sim, decode, encode, monitor, ping, info, loop-bench).
-fn board_verb(cmd: Cmd) -> Result<u8, String> {
+fn board_verb(cmd: Cmd) -> Run {
     let on = |s: OnOff| matches!(s, OnOff::On);
     match cmd {
         Cmd::Enable { state, link } => {
@@ -861,11 +935,12 @@ fn board_verb(cmd: Cmd) -> Result<u8, String> {
             }
             expect_kind(link.kind, SerialKind::Serial, NOT_TEENSY)?;
             if let Some(flag) = pi.first_given() {
-                return Err(format!("{flag} is an option of drive --kind pi-spi; this is a seed 001 drive (--kind serial): give --pwm"));
+                return Err(Failure::usage(format!("{flag} is an option of drive --kind pi-spi; this is a seed 001 drive (--kind serial): give --pwm")));
             }
-            let pwm = pwm.ok_or("drive --kind serial needs --pwm: the duties of motors 1 to 4, e.g. --pwm 300,-300,0,0")?;
-            let pwm = device::parse_list(&pwm, "--pwm")?;
-            let plan = DrivePlan::new(&pwm, timeout_ms, hz.unwrap_or(50.0), seconds, enable)?;
+            let pwm = pwm.ok_or_else(|| Failure::usage("drive --kind serial needs --pwm: the duties of motors 1 to 4, e.g. --pwm 300,-300,0,0"))?;
+            let pwm = device::parse_list(&pwm, "--pwm").or_exit(Exit::Usage)?;
+            let plan = DrivePlan::new(&pwm, timeout_ms, hz.unwrap_or(50.0), seconds, enable)
+                .or_exit(Exit::Usage)?;
             cdc_verb(&link, &CdcVerb::Drive(plan))
         }
         Cmd::Move {
@@ -880,8 +955,10 @@ fn board_verb(cmd: Cmd) -> Result<u8, String> {
             motors,
         } => {
             expect_kind(link.kind, SerialKind::Teensy, NOT_SERIAL)?;
-            let angles = device::parse_list(&angles, "--angles")?;
-            let plan = MovePlan::new(&angles, motors, speed, relative, hz, seconds, once, cal)?;
+            check_motors(motors)?;
+            let angles = device::parse_list(&angles, "--angles").or_exit(Exit::Usage)?;
+            let plan = MovePlan::new(&angles, motors, speed, relative, hz, seconds, once, cal)
+                .or_exit(Exit::Usage)?;
             teensy_verb(&link, motors, &TeensyVerb::Move(plan))
         }
         Cmd::Cal { link, motors } => {
@@ -917,16 +994,16 @@ fn board_verb(cmd: Cmd) -> Result<u8, String> {
             motors,
         } => {
             let h = SendHex {
-                bytes: cli::parse_hex(&hex)?,
+                bytes: cli::parse_hex(&hex).or_exit(Exit::Usage)?,
                 listen: Duration::from_millis(listen_ms),
             };
             match link.kind.unwrap_or(SerialKind::Serial) {
                 SerialKind::Serial => cdc_verb(&link, &CdcVerb::SendHex(h)),
                 SerialKind::Teensy => teensy_verb(&link, motors, &TeensyVerb::SendHex(h)),
-                SerialKind::PiSpi => Err(NOT_PI.into()),
+                SerialKind::PiSpi => Err(Failure::usage(NOT_PI)),
             }
         }
-        _ => Err("internal: not a board verb".into()),
+        _ => Err(Failure::usage("internal: not a board verb")),
     }
 }
 
@@ -936,11 +1013,15 @@ fn info(
     speed: u32,
     timeout_ms: u32,
     json: bool,
-) -> Result<(), String> {
+) -> Run {
     let text = if let Some(path) = capture {
-        cli::info::info_capture_file(path, json)?
+        let bytes = std::fs::read(path)
+            .map_err(|e| format!("cannot read {}: {e}", path.display()))
+            .or_exit(Exit::NoInput)?;
+        cli::info::info_capture(&path.display().to_string(), &bytes, json)
+            .or_exit(Exit::DataRefused)?
     } else if let Some(device) = device {
-        let mut spi = SpiTransport::open(device, speed).map_err(|e| e.to_string())?;
+        let mut spi = SpiTransport::open(device, speed).or_exit(Exit::Unavailable)?;
         let mut pacer = Pacer::contract();
         let t0 = Instant::now();
         // A start that differs from run to run; the query moves past the MCU's last accepted seq anyway.
@@ -951,12 +1032,15 @@ fn info(
         cli::info::info_live(&mut spi, first_seq, exchanges, json, || {
             pacer.wait();
             u32::try_from(t0.elapsed().as_micros() & u128::from(u32::MAX)).unwrap_or(0)
-        })?
+        })
+        .or_exit(Exit::Unavailable)?
     } else {
-        return Err("give --capture FILE or --device /dev/spidevX.Y".into());
+        return Err(Failure::usage(
+            "give --capture FILE or --device /dev/spidevX.Y",
+        ));
     };
     out!("{text}");
-    Ok(())
+    Ok(Exit::Ok)
 }
 
 /// The hex argument of `decode`: as given, or `-` for everything on standard input.
@@ -973,13 +1057,8 @@ fn hex_argument(hex: String) -> Result<String, String> {
     Ok(text)
 }
 
-fn loop_bench(seconds: f64) -> Result<(), String> {
-    if !(seconds.is_finite() && seconds > 0.0 && seconds <= device::MAX_SECONDS) {
-        return Err(format!(
-            "--seconds {seconds}: give a duration above 0 and at most {} s",
-            device::MAX_SECONDS
-        ));
-    }
+fn loop_bench(seconds: f64) -> Run {
+    check_seconds(seconds)?;
     // The same work as on the robot (IK, encode, decode, checks), against a device that answers
     // a valid feedback frame instantly.
     let mut reply = [0u8; FRAME_LEN];
@@ -991,8 +1070,7 @@ fn loop_bench(seconds: f64) -> Result<(), String> {
         Bridge::new(BridgeConfig::DEFAULT),
     );
     link.pacer = Pacer::contract();
-    link.run_for(secs(seconds), |_| {})
-        .map_err(|e| e.to_string())?;
+    link.run_for(secs(seconds), |_| {}).or_exit(Exit::Io)?;
     let s = &link.pacer.stats;
     out!("{}", s.summary());
     out!(
@@ -1001,53 +1079,94 @@ fn loop_bench(seconds: f64) -> Result<(), String> {
             "misses": s.misses, "miss_rate": s.miss_rate(), "mean_us": s.mean_us(), "std_us": s.std_us(),
             "min_us": s.min_us, "max_us": s.max_us, "skipped": s.skipped})
     );
-    Ok(())
+    Ok(Exit::Ok)
+}
+
+/// `decode`: the frame (or capture) as JSON; a capture without a frame is refused data.
+fn decode(frame: FrameKind, hex: String, motors: usize) -> Run {
+    if is_teensy(frame) {
+        check_motors(motors)?;
+    }
+    let hex = hex_argument(hex).or_exit(Exit::Io)?;
+    let d = cli::decode_report(frame, &hex, motors).or_exit(Exit::DataRefused)?;
+    out!("{}", d.json);
+    match d.no_frame {
+        None => Ok(Exit::Ok),
+        Some(why) => Err(Failure::data(why)),
+    }
+}
+
+/// `encode`: the JSON message as a frame in hex.
+fn encode(frame: FrameKind, json: &str, motors: usize) -> Run {
+    if is_teensy(frame) {
+        check_motors(motors)?;
+    }
+    let hex = cli::encode(frame, json, motors).or_exit(Exit::DataRefused)?;
+    out!("{hex}");
+    Ok(Exit::Ok)
+}
+
+/// The frame kinds whose size depends on `--motors`.
+fn is_teensy(frame: FrameKind) -> bool {
+    matches!(frame, FrameKind::TeensyLegacy | FrameKind::TeensyRobust)
+}
+
+/// `sim`: the scenarios' table; exit 1 if an expectation failed.
+fn sim_verb(
+    scenarios: &[String],
+    out: &Path,
+    duration: Option<f64>,
+    no_plots: bool,
+    list: bool,
+) -> Run {
+    if list {
+        for (n, text) in scenario::BUILTIN {
+            let d = Scenario::from_toml(text, n)
+                .map(|s| s.description)
+                .unwrap_or_default();
+            out!("{n:20} {d}");
+        }
+        return Ok(Exit::Ok);
+    }
+    if run_sim(scenarios, out, duration, !no_plots)? {
+        Ok(Exit::Ok)
+    } else {
+        eprintln!("some scenario expectations failed (see FAIL lines above)");
+        Ok(Exit::Failed)
+    }
+}
+
+/// Parses the command line; a usage error exits 64 (clap's own would be 2), help and version 0.
+fn parse() -> Result<Cli, ExitCode> {
+    Cli::try_parse().map_err(|e| {
+        let _ = e.print();
+        if e.use_stderr() {
+            ExitCode::from(Exit::Usage.code())
+        } else {
+            ExitCode::SUCCESS
+        }
+    })
 }
 
 fn main() -> ExitCode {
-    let cli = Cli::parse();
-    let r: Result<u8, String> = match cli.cmd {
+    let cli = match parse() {
+        Ok(cli) => cli,
+        Err(code) => return code,
+    };
+    let r: Run = match cli.cmd {
         Cmd::Sim {
             scenarios,
             out,
             duration,
             no_plots,
             list,
-        } => {
-            if list {
-                for (n, text) in scenario::BUILTIN {
-                    let d = Scenario::from_toml(text, n)
-                        .map(|s| s.description)
-                        .unwrap_or_default();
-                    out!("{n:20} {d}");
-                }
-                Ok(0)
-            } else {
-                run_sim(&scenarios, &out, duration, !no_plots).map(|ok| {
-                    if !ok {
-                        eprintln!("some scenario expectations failed (see FAIL lines above)");
-                    }
-                    u8::from(!ok)
-                })
-            }
-        }
-        Cmd::Decode { frame, hex, motors } => hex_argument(hex)
-            .and_then(|hex| cli::decode_report(frame, &hex, motors))
-            .and_then(|d| {
-                out!("{}", d.json);
-                match d.no_frame {
-                    None => Ok(0),
-                    Some(why) => Err(why),
-                }
-            }),
+        } => sim_verb(&scenarios, &out, duration, no_plots, list),
+        Cmd::Decode { frame, hex, motors } => decode(frame, hex, motors),
         Cmd::Encode {
             frame,
             json,
             motors,
-        } => cli::encode(frame, &json, motors).map(|s| {
-            out!("{s}");
-            0
-        }),
+        } => encode(frame, &json, motors),
         Cmd::Monitor {
             device,
             kind,
@@ -1092,16 +1211,15 @@ fn main() -> ExitCode {
             speed,
             timeout_ms,
             json,
-        )
-        .map(|()| 0),
-        Cmd::LoopBench { seconds } => loop_bench(seconds).map(|()| 0),
+        ),
+        Cmd::LoopBench { seconds } => loop_bench(seconds),
         verb => board_verb(verb),
     };
     match r {
-        Ok(code) => ExitCode::from(code),
-        Err(e) => {
-            eprintln!("error: {e}");
-            ExitCode::from(device::EXIT_ERROR)
+        Ok(exit) => ExitCode::from(exit.code()),
+        Err(f) => {
+            eprintln!("error: {}", f.message);
+            ExitCode::from(f.exit.code())
         }
     }
 }

@@ -15,7 +15,7 @@
 //! ```
 //!
 //! The verdict is the exit status ([`Verdict::exit_code`]); an argument, open or I/O error is the
-//! `Err` of the verb and exits with [`EXIT_ERROR`].
+//! `Err` of the verb, and the CLI gives it its own status ([`crate::cli::exit::Exit`]).
 //!
 //! Leaving BRAKE (seed 001 `drive --enable`, seed 003 `move --cal`): the board leaves BRAKE at a
 //! tick after a re-arm and a fresh enabled frame. Its `MOTOR_ENABLE 1` / `CAL` carries a coasting
@@ -51,18 +51,10 @@ pub enum Verdict {
     NoReply,
 }
 
-/// Exit status of an error outside the exchange: a bad argument (refused before anything is sent),
-/// a device that cannot be opened, an I/O error. Also clap's status for a usage error.
-pub const EXIT_ERROR: u8 = 2;
-
 impl Verdict {
-    /// The process exit status: 0 done, 1 refused, 3 no reply ([`EXIT_ERROR`] is 2).
-    pub const fn exit_code(self) -> u8 {
-        match self {
-            Self::Done => 0,
-            Self::Refused => 1,
-            Self::NoReply => 3,
-        }
+    /// The process exit status: 0 done, 1 refused, 69 no reply (see [`crate::cli::exit::Exit`]).
+    pub fn exit_code(self) -> u8 {
+        crate::cli::exit::Exit::from(self).code()
     }
 
     /// The name printed in `verdict`.

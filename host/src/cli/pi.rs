@@ -48,7 +48,7 @@
 //!  {"t_ms":..,"verdict":"done"|"refused"|"no_reply",..}                always the last line
 //! ```
 //!
-//! * `no_reply` (exit 3): `update_time` never advanced between two decoded replies: none decoded
+//! * `no_reply` (exit 69): `update_time` never advanced between two decoded replies: none decoded
 //!   (all 0x00 or 0xFF bytes: no board), only one, or all with the same `update_time` (a stale
 //!   board: its SPI callback does not run; `"stale":true`).
 //! * `refused` (exit 1, `drive` only): commands were sent for at least [`REFUSED_AFTER`], some motor
@@ -57,8 +57,8 @@
 //!   of those motors' `motor.position` ever differed from its value in the first reply.
 //! * `done` (exit 0): otherwise.
 //!
-//! An argument error refuses the run before the device is opened, an open or transfer error ends
-//! it; both exit [`super::device::EXIT_ERROR`] (2). A run stopped by a signal ends normally, with
+//! An argument error refuses the run before the device is opened (exit 64), an open error (69) or a
+//! transfer error (74) ends it (see [`super::exit::Exit`]). A run stopped by a signal ends normally, with
 //! `"interrupted":true`.
 
 use std::path::Path;
