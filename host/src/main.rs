@@ -198,12 +198,16 @@ enum Cmd {
     },
     /// Exchange a few frames with a device and report round trips.
     ///
-    /// --kind spi: seed 000 command/feedback exchanges, with the MCU time and the clock offset
-    /// (text lines). --kind serial: PING, answered by a STATUS (or an ACK of PING). --kind teensy:
-    /// ENDEFF_OFF, answered by its echo (seed 003 has no probe message; switching the end effector
-    /// off is the safe, idempotent round trip, but it does switch it off). Serial kinds print JSON
-    /// lines: {"ping":i,"round_trip_us":..,"reply":{..}} or {"ping":i,"no_reply_ms":..}, then the
-    /// verdict with the round-trip statistics; exit status 69 if nothing answered.
+    /// --kind spi: command/feedback exchanges, with the MCU time and the clock offset (text lines),
+    /// then the round trip's min/avg/max. --kind serial: PING, answered by a STATUS (or an ACK of
+    /// PING). --kind teensy: ENDEFF_OFF, answered by its echo (the Teensy serial link has no probe
+    /// message; switching the end effector off is the safe, idempotent round trip, but it does
+    /// switch it off). Before each probe the input is discarded, so the reply is the first
+    /// matching message that arrives after the probe: a periodic STATUS, or the late reply of an
+    /// earlier probe, is never counted. Serial kinds print JSON lines: {"ping":i,
+    /// "round_trip_us":..,"reply":{..}} or {"ping":i,"no_reply_ms":..}, then the verdict with
+    /// "round_trip_us":{"min","avg","max"} over the replies of the --count pings and
+    /// "discarded_bytes"; exit status 69 if nothing answered.
     ///
     /// --kind pi-spi: at least two transfers, 10 ms apart, of a buffer the board answers but
     /// ignores (every byte 0: transferVersion 0), so a ping never changes what the robot does. Lines
@@ -787,7 +791,7 @@ fn ping(a: &PingArgs<'_>) -> Run {
     }
     let t = open_spi(device, speed)?;
     let mut link = Link::new(Boxed(t), Bridge::new(BridgeConfig::DEFAULT));
-    let mut ok = 0u32;
+    let mut rtts: Vec<u64> = Vec::new();
     for i in 0..count {
         let t0 = link.now_us();
         let r = link.cycle();
@@ -795,7 +799,7 @@ fn ping(a: &PingArgs<'_>) -> Run {
         match r {
             Ok(_) => match link.bridge.last_feedback {
                 Some(fb) => {
-                    ok = ok.saturating_add(1);
+                    rtts.push(t1.saturating_sub(t0));
                     out!(
                         "{i}: {} us, MCU time {} us, mode {}, faults {:#06x}, offset estimate {:?} us",
                         t1.saturating_sub(t0),
@@ -810,7 +814,14 @@ fn ping(a: &PingArgs<'_>) -> Run {
             Err(e) => out!("{i}: {e}"),
         }
     }
-    if ok == 0 {
+    if let (Some(min), Some(max)) = (rtts.iter().min(), rtts.iter().max()) {
+        let avg = rtts.iter().sum::<u64>() as f64 / rtts.len() as f64;
+        out!(
+            "round trip over {} of {count} exchanges: min {min} us, avg {avg:.0} us, max {max} us",
+            rtts.len()
+        );
+    }
+    if rtts.is_empty() {
         return Err(Failure::new(Exit::Unavailable, format!(
             "no valid reply from {device} in {count} exchanges: check wiring, SPI mode 0, and that the firmware runs"
         )));

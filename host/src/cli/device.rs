@@ -358,6 +358,8 @@ trait BoardLink {
 
     /// The byte stream, for raw writes and its read timeout.
     fn stream(&mut self) -> &mut Self::Stream;
+    /// Discards everything received and not yet read; returns the bytes discarded.
+    fn discard_input(&mut self) -> Result<usize, LinkError>;
     /// Writes one message.
     fn send(&mut self, m: &Self::Msg) -> Result<(), LinkError>;
     /// One read: the messages it completed.
@@ -464,6 +466,15 @@ fn send_hex<L: BoardLink>(s: &mut Session<'_, L>, h: &SendHex) -> Result<Verdict
 }
 
 /// `count` round trips of `probe`, each waiting up to `wait` for a message satisfying `is_reply`.
+///
+/// Before each probe the input is discarded (a periodic frame, or the late reply of an earlier
+/// probe, would otherwise be taken for this one's reply), so the reply is the first matching
+/// message that arrives after the probe was written:
+///
+/// ```text
+///  host   discard ── PING ─────────────── discard ── PING ───── ...
+///  board  STATUS (periodic: dropped)  ◀── STATUS (the reply to this PING)
+/// ```
 fn ping<L: BoardLink>(
     s: &mut Session<'_, L>,
     probe: L::Msg,
@@ -472,7 +483,10 @@ fn ping<L: BoardLink>(
     wait: Duration,
 ) -> Result<Verdict, String> {
     let mut rtts = Vec::new();
+    let mut discarded = 0usize;
     for i in 0..count {
+        let stale = s.link.discard_input().map_err(err)?;
+        discarded = discarded.saturating_add(stale);
         let t = Instant::now();
         s.send(&probe)?;
         match s.wait_for(after(t, wait), &is_reply)? {
@@ -494,7 +508,7 @@ fn ping<L: BoardLink>(
     let decoder = s.link.decoder();
     s.out.put(
         json!({"verdict": verdict.as_str(), "sent": count, "replies": rtts.len(),
-        "round_trip_us": rtt_json(&rtts), "decoder": decoder}),
+        "round_trip_us": rtt_json(&rtts), "discarded_bytes": discarded, "decoder": decoder}),
     );
     Ok(verdict)
 }
@@ -504,7 +518,7 @@ fn rtt_json(rtts: &[Duration]) -> Value {
         return Value::Null;
     };
     let sum: f64 = rtts.iter().map(Duration::as_secs_f64).sum();
-    json!({"min": us(*min), "max": us(*max), "mean": (sum / rtts.len() as f64 * 1e6).round()})
+    json!({"min": us(*min), "avg": (sum / rtts.len() as f64 * 1e6).round(), "max": us(*max)})
 }
 
 /// Sends `msg` and waits up to `wait` for its reply, a message satisfying `is_reply`.
@@ -690,6 +704,10 @@ impl<S: ByteStream> BoardLink for CdcLink<S> {
         &mut self.stream
     }
 
+    fn discard_input(&mut self) -> Result<usize, LinkError> {
+        CdcLink::discard_input(self)
+    }
+
     fn send(&mut self, m: &cdc::Message) -> Result<(), LinkError> {
         CdcLink::send(self, m)
     }
@@ -839,6 +857,10 @@ impl<S: ByteStream, const N: usize> BoardLink for TeensyLink<S, N> {
 
     fn stream(&mut self) -> &mut S {
         &mut self.stream
+    }
+
+    fn discard_input(&mut self) -> Result<usize, LinkError> {
+        TeensyLink::discard_input(self)
     }
 
     fn send(&mut self, m: &teensy::CmdMsg<N>) -> Result<(), LinkError> {
