@@ -169,6 +169,10 @@ enum Cmd {
     },
     /// Run the 1 kHz bridge disarmed against a device and print feedback and diagnostics.
     ///
+    /// --kind spi|serial|teensy: what the port held before the run is discarded, so every line is
+    /// news; if no valid frame arrives within --seconds, a warning on stderr and exit status 75
+    /// (try again: board off, unplugged, wrong --kind or baud rate).
+    ///
     /// --kind pi-spi: transfers the board ignores (transferVersion 0) at --hz for --seconds or
     /// --count transfers, every TxBuffer received printed as a JSON line ({"transfer":k,"tx":{..}};
     /// one that does not decode: {"transfer":k,"error":"version","version_byte":..,"hint":..},
@@ -581,6 +585,8 @@ fn elapsed_ms(t0: Instant) -> u64 {
 /// Seed 001: PING every 100 ms, print every received message with the ladder event it maps to.
 fn monitor_cdc(device: &str, baud: u32, seconds: f64) -> Run {
     let mut link = CdcLink::new(open_serial(device, baud)?);
+    // Bytes that arrived before this run are not news: drop them, so t_ms 0 is a fresh frame.
+    link.discard_input().or_exit(Exit::Io)?;
     let t0 = Instant::now();
     let end = t0.checked_add(secs(seconds)).unwrap_or(t0);
     let mut last_ping: Option<Instant> = None;
@@ -604,11 +610,21 @@ fn monitor_cdc(device: &str, baud: u32, seconds: f64) -> Run {
             );
         }
     }
+    let stats = link.stats();
+    eprintln!("{}", serde_json::json!({"device": device, "stats": stats}));
+    silence(device, seconds, u64::from(stats.frames))
+}
+
+/// The end of a monitor run: `frames` frames decoded in `seconds`; none is a warning and
+/// [`Exit::Temporary`].
+fn silence(device: &str, seconds: f64, frames: u64) -> Run {
+    if frames > 0 {
+        return Ok(Exit::Ok);
+    }
     eprintln!(
-        "{}",
-        serde_json::json!({"device": device, "stats": link.stats()})
+        "warning: no frame from {device} in {seconds} s: check that the board runs and is connected, the link kind (--kind) and the baud rate"
     );
-    Ok(Exit::Ok)
+    Ok(Exit::Temporary)
 }
 
 /// Seed 003: listen and print every robust frame received. (The outer `Result` is the motor count's,
@@ -619,6 +635,8 @@ fn monitor_teensy<const N: usize>(device: &str, baud: u32, seconds: f64) -> Resu
 
 fn monitor_teensy_n<const N: usize>(device: &str, baud: u32, seconds: f64) -> Run {
     let mut link = TeensyLink::<_, N>::new(open_serial(device, baud)?);
+    // Bytes that arrived before this run are not news: drop them, so t_ms 0 is a fresh frame.
+    link.discard_input().or_exit(Exit::Io)?;
     let t0 = Instant::now();
     let end = t0.checked_add(secs(seconds)).unwrap_or(t0);
     while Instant::now() < end {
@@ -635,11 +653,9 @@ fn monitor_teensy_n<const N: usize>(device: &str, baud: u32, seconds: f64) -> Ru
             );
         }
     }
-    eprintln!(
-        "{}",
-        serde_json::json!({"device": device, "stats": link.stats()})
-    );
-    Ok(Exit::Ok)
+    let stats = link.stats();
+    eprintln!("{}", serde_json::json!({"device": device, "stats": stats}));
+    silence(device, seconds, u64::from(stats.frames))
 }
 
 struct Boxed(Box<dyn Transport>);
@@ -751,7 +767,12 @@ fn monitor_other(device: &str, kind: Kind, speed: u32, seconds: f64, motors: usi
         }
     }
     eprintln!("loop: {}", link.pacer.stats.summary());
-    Ok(Exit::Ok)
+    let frames = link
+        .bridge
+        .stats
+        .feedback_ok
+        .saturating_add(link.bridge.stats.info_frames);
+    silence(device, seconds, frames)
 }
 
 /// What `ping` was asked.

@@ -164,3 +164,40 @@ fn decode_dash_reads_standard_input() {
         "{out}"
     );
 }
+
+/// A pty pair: the master end and the slave's device path; the slave fd is held open.
+fn pty() -> (File, String, OwnedFd) {
+    let p = nix::pty::openpty(None, None).unwrap();
+    let path = nix::unistd::ttyname(p.slave.as_fd()).unwrap();
+    (
+        File::from(p.master),
+        path.to_string_lossy().into_owned(),
+        p.slave,
+    )
+}
+
+#[test]
+fn monitor_of_a_silent_port_warns_and_exits_non_zero() {
+    for kind in ["serial", "teensy"] {
+        let (_master, path, _slave) = pty();
+        let (code, out, err) = motorlink(&["monitor", &path, "--kind", kind, "--seconds", "0.3"]);
+        assert_ne!(code, 0, "{kind}: {out}");
+        assert!(err.contains("no frame"), "{kind}: {err}");
+        assert!(!out.contains("\"message\""), "{kind}: {out}");
+    }
+}
+
+#[test]
+fn monitor_drops_what_the_port_held_before_it_opened() {
+    let (mut master, path, _slave) = pty();
+    // A STATUS the board sent before monitor started: stale, it must not be shown as news.
+    let stale = cdc_hex(r#"{"type":"status","t_ms":5,"vbat_mv":12000,"flags":8,"err":0}"#);
+    let bytes: Vec<u8> = (0..stale.len())
+        .step_by(2)
+        .map(|i| u8::from_str_radix(&stale[i..i + 2], 16).unwrap())
+        .collect();
+    master.write_all(&bytes).unwrap();
+    let (code, out, err) = motorlink(&["monitor", &path, "--kind", "serial", "--seconds", "0.3"]);
+    assert!(!out.contains("\"status\""), "stale STATUS replayed: {out}");
+    assert_ne!(code, 0, "nothing fresh came: {err}");
+}

@@ -18,6 +18,7 @@ const DATA: i32 = 65;
 const NO_INPUT: i32 = 66;
 const UNAVAILABLE: i32 = 69;
 const IO: i32 = 74;
+const TEMPORARY: i32 = 75;
 
 fn motorlink(args: &[&str]) -> (i32, String, String) {
     let out = Command::new(env!("CARGO_BIN_EXE_motorlink"))
@@ -126,6 +127,20 @@ fn no_reply_exits_69() {
         ]),
         UNAVAILABLE
     );
+    drop(p);
+}
+
+#[test]
+fn a_silent_port_exits_75() {
+    let p = nix::pty::openpty(None, None).unwrap();
+    let path = nix::unistd::ttyname(p.slave.as_fd()).unwrap();
+    let path = path.to_str().unwrap();
+    for kind in ["serial", "teensy"] {
+        assert_eq!(
+            code(&["monitor", path, "--kind", kind, "--seconds", "0.2"]),
+            TEMPORARY
+        );
+    }
     drop(p);
 }
 
