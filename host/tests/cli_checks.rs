@@ -201,3 +201,46 @@ fn monitor_drops_what_the_port_held_before_it_opened() {
     assert!(!out.contains("\"status\""), "stale STATUS replayed: {out}");
     assert_ne!(code, 0, "nothing fresh came: {err}");
 }
+
+#[test]
+fn sim_with_a_shorter_duration_does_not_judge_what_needs_the_whole_run() {
+    let dir = std::env::temp_dir().join(format!("motorlink-sim-{}", std::process::id()));
+    let d = dir.to_string_lossy().into_owned();
+    // nominal expects to be moving at its end (2 s); cut to 0.05 s, the robot has barely started.
+    let (code, out, err) = motorlink(&[
+        "sim",
+        "nominal",
+        "--duration",
+        "0.05",
+        "--no-plots",
+        "--out",
+        &d,
+    ]);
+    assert_eq!(code, 0, "{out}\n{err}");
+    assert!(out.contains("not judged"), "{out}");
+    assert!(out.contains("moving_at_end"), "{out}");
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+#[test]
+fn a_typo_in_a_scenario_is_refused() {
+    let dir = std::env::temp_dir().join(format!("motorlink-typo-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let file = dir.join("typo.toml");
+    std::fs::write(
+        &file,
+        "name = \"typo\"\nduration_s = 0.05\n[expect]\nnever_brak = true\n",
+    )
+    .unwrap();
+    let out_dir = dir.join("out");
+    let (code, out, err) = motorlink(&[
+        "sim",
+        file.to_str().unwrap(),
+        "--no-plots",
+        "--out",
+        out_dir.to_str().unwrap(),
+    ]);
+    assert_ne!(code, 0, "{out}");
+    assert!(err.contains("never_brak"), "{err}");
+    let _ = std::fs::remove_dir_all(&dir);
+}
