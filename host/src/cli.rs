@@ -16,25 +16,25 @@ pub mod exit;
 pub mod info;
 pub mod pi;
 
-/// The frame kinds of every seed protocol.
+/// The frame kinds of every link.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
 pub enum FrameKind {
-    /// Seed 000 SPI command frame (Jetson → MCU), 64 bytes.
+    /// AMR SPI link command frame (Jetson → MCU), 64 bytes.
     AmrCommand,
-    /// Seed 000 SPI feedback frame (MCU → Jetson), 64 bytes.
+    /// AMR SPI link feedback frame (MCU → Jetson), 64 bytes.
     AmrFeedback,
-    /// Seed 000 SPI identity frame `McuInfo` (MCU → Jetson, in the feedback slot after a command
+    /// AMR SPI link identity frame `McuInfo` (MCU → Jetson, in the feedback slot after a command
     /// with request 1), 64 bytes.
     AmrInfo,
-    /// Seed 001 USB CDC / UART frame `AA 55 | id | len | payload | crc` (decode also takes a capture).
+    /// USB CDC four-motor link frame (USB CDC / UART) `AA 55 | id | len | payload | crc` (decode also takes a capture).
     Cdc,
-    /// Seed 004 Pi → STM32 `RxBuffer`, 179 bytes.
+    /// Raspberry Pi SPI link, Pi → STM32 `RxBuffer`, 179 bytes.
     PiRx,
-    /// Seed 004 STM32 → Pi `TxBuffer`, 167 bytes (or a whole 179-byte transfer).
+    /// Raspberry Pi SPI link, STM32 → Pi `TxBuffer`, 167 bytes (or a whole 179-byte transfer).
     PiTx,
-    /// Seed 003 legacy `CmdMsg` packet ending in `\n`, 21 + 4·motors bytes.
+    /// Teensy serial link legacy `CmdMsg` packet ending in `\n`, 21 + 4·motors bytes.
     TeensyLegacy,
-    /// Seed 003 robust `CmdMsg` frame: COBS(version | CmdMsg | CRC) 00 (decode also takes a capture).
+    /// Teensy serial link robust `CmdMsg` frame: COBS(version | CmdMsg | CRC) 00 (decode also takes a capture).
     TeensyRobust,
 }
 
@@ -673,7 +673,7 @@ fn decode_cdc(bytes: &[u8]) -> Result<Decoded, String> {
         return Err(refused(
             RejectReason::Framing,
             &format!(
-                "no seed 001 frame in these {} bytes (no AA 55 start, or the last frame is incomplete: {} bytes wait for the rest); capture from a start of frame",
+                "no USB CDC frame in these {} bytes (no AA 55 start, or the last frame is incomplete: {} bytes wait for the rest); capture from a start of frame",
                 bytes.len(),
                 dec.buffered()
             ),

@@ -43,7 +43,7 @@ use statemachine::Estop;
     name = "motorlink",
     version,
     after_help = motorlink::cli::exit::TABLE,
-    about = "Host side of the AMR motor controller: simulator, frame tools, device monitor, serial board verbs, and the Raspberry Pi SPI verbs of seed 004 (ping, monitor, drive --kind pi-spi)"
+    about = "Host side of the AMR motor controller: simulator, frame tools, device monitor, serial board verbs, and the Raspberry Pi SPI link's verbs (ping, monitor, drive --kind pi-spi)"
 )]
 struct Cli {
     #[command(subcommand)]
@@ -52,24 +52,24 @@ struct Cli {
 
 #[derive(Clone, Copy, PartialEq, Eq, ValueEnum)]
 enum Kind {
-    /// Linux spidev (seed 000), 2 MHz mode 0.
+    /// The AMR SPI link (Linux spidev, 64-byte frames at 1 kHz), 2 MHz mode 0.
     Spi,
-    /// Serial / USB CDC speaking seed 001 (`AA 55` frames): PING, IMU, STATUS, ACK.
+    /// The USB CDC four-motor link (serial / USB CDC, `AA 55` frames): PING, IMU, STATUS, ACK.
     Serial,
-    /// Serial to a Teensy speaking seed 003 robust frames (COBS + CRC); monitor only listens.
+    /// The Teensy serial link (robust frames: COBS + CRC); monitor only listens.
     Teensy,
-    /// Raspberry Pi spidev to the STM32's SPI2 (seed 004): 179-byte full-duplex transfers, 2 MHz mode 0.
+    /// The Raspberry Pi SPI link (spidev to the STM32's SPI2): 179-byte full-duplex transfers, 2 MHz mode 0.
     PiSpi,
 }
 
 /// The serial link kinds of the board verbs.
 #[derive(Clone, Copy, PartialEq, Eq, ValueEnum)]
 enum SerialKind {
-    /// Seed 001 (`AA 55` frames): ping, enable, estop, drive, send-hex.
+    /// The USB CDC four-motor link (`AA 55` frames): ping, enable, estop, drive, send-hex.
     Serial,
-    /// Seed 003 robust frames: ping, move, cal, endeff, config, send-hex.
+    /// The Teensy serial link (robust frames): ping, move, cal, endeff, config, send-hex.
     Teensy,
-    /// Seed 004 over spidev (the device is /dev/spidevB.C): drive (and ping, monitor).
+    /// The Raspberry Pi SPI link over spidev (the device is /dev/spidevB.C): drive (and ping, monitor).
     PiSpi,
 }
 
@@ -154,7 +154,7 @@ enum Cmd {
         /// The bytes in hex (e.g. from a logic-analyser capture); `-` reads them from standard
         /// input (any number of lines; spaces, ':' and ',' allowed).
         hex: String,
-        /// Motors in a seed 003 CmdMsg (MAX_SUPPORTED_MTRS), 1 to 16.
+        /// Joints in a Teensy serial link's CmdMsg (MAX_SUPPORTED_MTRS), 1 to 16.
         #[arg(long, default_value_t = cli::DEFAULT_MOTORS)]
         motors: usize,
     },
@@ -166,7 +166,7 @@ enum Cmd {
         frame: FrameKind,
         /// The message as JSON (field names as `decode` prints them; see --help).
         json: String,
-        /// Motors in a seed 003 CmdMsg (MAX_SUPPORTED_MTRS), 1 to 16.
+        /// Joints in a Teensy serial link's CmdMsg (MAX_SUPPORTED_MTRS), 1 to 16.
         #[arg(long, default_value_t = cli::DEFAULT_MOTORS)]
         motors: usize,
     },
@@ -237,11 +237,11 @@ enum Cmd {
         /// How long to wait for each reply, ms (serial kinds).
         #[arg(long, default_value_t = 200)]
         wait_ms: u64,
-        /// Motors in a seed 003 CmdMsg (--kind teensy).
+        /// Joints in a Teensy serial link's CmdMsg (--kind teensy), 1 to 16.
         #[arg(long, default_value_t = cli::DEFAULT_MOTORS)]
         motors: usize,
     },
-    /// Seed 001: MOTOR_ENABLE on|off, wait for its ACK (exit 1 if the board refuses it).
+    /// USB CDC four-motor link: MOTOR_ENABLE on|off, wait for its ACK (exit 1 if the board refuses it).
     ///
     /// `on` asks the board to leave BRAKE; it does so only when fresh SET_MOTOR_PWM frames follow
     /// before its comm-loss threshold, so to drive use `drive --enable`, which sends both. The
@@ -255,7 +255,7 @@ enum Cmd {
         #[command(flatten)]
         link: SerialArgs,
     },
-    /// Seed 001: ESTOP engage|release, wait for its ACK.
+    /// USB CDC four-motor link: ESTOP engage|release, wait for its ACK.
     ///
     /// engage latches BRAKE at once. release clears this link's ESTOP; the board stays braked
     /// until re-armed (`drive --enable`). Last line as for `enable` (msg_id 3).
@@ -267,7 +267,7 @@ enum Cmd {
         #[command(flatten)]
         link: SerialArgs,
     },
-    /// Seed 001: send SET_MOTOR_PWM at a fixed rate for a while, then stop sending.
+    /// USB CDC four-motor link: send SET_MOTOR_PWM at a fixed rate for a while, then stop sending.
     ///
     /// Frames go out on absolute deadlines (--hz; the first at once) for --seconds; every STATUS,
     /// IMU and ACK received is printed. Then nothing more is sent: the board brakes on its own
@@ -284,7 +284,7 @@ enum Cmd {
     /// "last_status":{..}},"decoder":{..},"pacing":{..},"stopped_early":..}. Exit 3 also if a drive
     /// of 0.2 s or more received no valid frame at all (the board sends STATUS every 100 ms).
     ///
-    /// --kind pi-spi (seed 004, device /dev/spidevB.C): one transfer with the motor shutdown bit
+    /// --kind pi-spi (the Raspberry Pi SPI link, device /dev/spidevB.C): one transfer with the motor shutdown bit
     /// set and every motor OFF (carrying the one-shot updates --odom-reset, --kinematics,
     /// --pid-speed, each sent exactly once), then the command buffer (--modes, --targets, --goals,
     /// --servo-modes, --servo-pos; shutdown bits clear: the bit's 1->0 edge is the board's re-arm)
@@ -323,7 +323,7 @@ enum Cmd {
         #[command(flatten)]
         pi: pi::PiDriveArgs,
     },
-    /// Seed 003: MTRS to absolute angles at a fixed rate (or once), checking every echo.
+    /// Teensy serial link: MTRS to absolute angles at a fixed rate (or once), checking every echo.
     ///
     /// Every echo must come back with cmd_success 1: a refusal stops the sending at once (exit 1),
     /// an echo missing --wait-ms after its command stops it too (exit 69). cmd_success 1 means the
@@ -367,7 +367,7 @@ enum Cmd {
         #[arg(long, default_value_t = cli::DEFAULT_MOTORS)]
         motors: usize,
     },
-    /// Seed 003: CAL, the explicit re-arm; wait for its echo.
+    /// Teensy serial link: CAL, the explicit re-arm; wait for its echo.
     ///
     /// The arm leaves BRAKE only when fresh MTRS frames follow before its comm-loss threshold: to
     /// move, use `move --cal`. Last line {"verdict":..,"sent":{..},"reply":{..},"round_trip_us":..}.
@@ -379,7 +379,7 @@ enum Cmd {
         #[arg(long, default_value_t = cli::DEFAULT_MOTORS)]
         motors: usize,
     },
-    /// Seed 003: ENDEFF_ON / ENDEFF_OFF, wait for the echo.
+    /// Teensy serial link: ENDEFF_ON / ENDEFF_OFF, wait for the echo.
     #[command(after_long_help = VERB_HELP)]
     Endeff {
         /// on or off.
@@ -391,7 +391,7 @@ enum Cmd {
         #[arg(long, default_value_t = cli::DEFAULT_MOTORS)]
         motors: usize,
     },
-    /// Seed 003: CONFIG, the joints' acceleration; wait for the echo (refused above the board's limit).
+    /// Teensy serial link: CONFIG, the joints' acceleration; wait for the echo (refused above the board's limit).
     #[command(after_long_help = VERB_HELP)]
     Config {
         #[command(flatten)]
@@ -419,11 +419,11 @@ enum Cmd {
         /// How long to listen after the write, ms.
         #[arg(long, default_value_t = 300)]
         listen_ms: u64,
-        /// Motors in a seed 003 CmdMsg (--kind teensy), 1 to 16.
+        /// Joints in a Teensy serial link's CmdMsg (--kind teensy), 1 to 16.
         #[arg(long, default_value_t = cli::DEFAULT_MOTORS)]
         motors: usize,
     },
-    /// Print the MCU's firmware identity and reset cause (seed 000 McuInfo), from a capture or live.
+    /// Print the MCU's firmware identity and reset cause (the AMR SPI link's McuInfo), from a capture or live.
     ///
     /// --capture FILE reads a binary file of concatenated 64-byte MISO frames (one per CS-low period,
     /// as a logic analyser or spidev records them) and prints every McuInfo frame in it. --device
@@ -601,7 +601,7 @@ fn elapsed_ms(t0: Instant) -> u64 {
     u64::try_from(t0.elapsed().as_millis()).unwrap_or(u64::MAX)
 }
 
-/// Seed 001: PING every 100 ms, print every received message with the ladder event it maps to.
+/// USB CDC four-motor link: PING every 100 ms, print every received message with the ladder event it maps to.
 fn monitor_cdc(device: &str, baud: u32, seconds: f64) -> Run {
     let mut link = CdcLink::new(open_serial(device, baud)?);
     // Bytes that arrived before this run are not news: drop them, so t_ms 0 is a fresh frame.
@@ -646,7 +646,7 @@ fn silence(device: &str, seconds: f64, frames: u64) -> Run {
     Ok(Exit::Temporary)
 }
 
-/// Seed 003: listen and print every robust frame received. (The outer `Result` is the motor count's,
+/// Teensy serial link: listen and print every robust frame received. (The outer `Result` is the motor count's,
 /// for `with_motors!`; it is checked before this runs.)
 fn monitor_teensy<const N: usize>(device: &str, baud: u32, seconds: f64) -> Result<Run, String> {
     Ok(monitor_teensy_n::<N>(device, baud, seconds))
@@ -875,7 +875,7 @@ fn print_line(v: Value) {
 }
 
 /// Runs `verb` with a stop flag raised by SIGINT, SIGTERM, SIGHUP or a closed standard output, and a
-/// sink that never exits the process: a paced seed 004 verb must end with its last buffer and line.
+/// sink that never exits the process: a paced Raspberry Pi SPI verb must end with its last buffer and line.
 fn with_stop(
     verb: impl FnOnce(
         &mut dyn FnMut() -> bool,
@@ -903,7 +903,7 @@ fn pi_drive(
     seconds: f64,
 ) -> Run {
     if pwm_given {
-        return Err(Failure::usage("--pwm is the seed 001 drive's; for --kind pi-spi give --modes pwm --targets D (duty -399..=399); nothing was sent"));
+        return Err(Failure::usage("--pwm is the USB CDC four-motor drive's; for --kind pi-spi give --modes pwm --targets D (duty -399..=399); nothing was sent"));
     }
     let speed = args.speed.unwrap_or(default_speed(Kind::PiSpi));
     let hz = hz.unwrap_or(pi::DEFAULT_HZ);
@@ -932,7 +932,7 @@ fn expect_kind(kind: Option<SerialKind>, want: SerialKind, instead: &str) -> Res
     }
 }
 
-/// Opens the device of a board verb and runs a seed 001 verb on it.
+/// Opens the device of a board verb and runs a USB CDC four-motor link verb on it.
 fn cdc_verb(link: &SerialArgs, verb: &CdcVerb) -> Run {
     let port = open_serial(&link.device, link.baud)?;
     let wait = Duration::from_millis(link.wait_ms);
@@ -940,7 +940,7 @@ fn cdc_verb(link: &SerialArgs, verb: &CdcVerb) -> Run {
     Ok(v.into())
 }
 
-/// Opens the device of a board verb and runs a seed 003 verb on it.
+/// Opens the device of a board verb and runs a Teensy serial link verb on it.
 fn teensy_verb(link: &SerialArgs, motors: usize, verb: &TeensyVerb) -> Run {
     check_motors(motors)?;
     let port = open_serial(&link.device, link.baud)?;
@@ -950,11 +950,11 @@ fn teensy_verb(link: &SerialArgs, motors: usize, verb: &TeensyVerb) -> Run {
 }
 
 const NOT_TEENSY: &str =
-    "this verb speaks seed 001 (--kind serial); for a seed 003 arm use move, cal, endeff, config";
+    "this verb speaks the USB CDC four-motor link (--kind serial); for a Teensy serial link arm use move, cal, endeff, config";
 const NOT_PI: &str =
-    "seed 004 (--kind pi-spi) has the verbs ping, monitor and drive (ping and monitor never command the motors)";
+    "the Raspberry Pi SPI link (--kind pi-spi) has the verbs ping, monitor and drive (ping and monitor never command the motors)";
 const NOT_SERIAL: &str =
-    "this verb speaks seed 003 (--kind teensy); for a seed 001 board use enable, estop, drive";
+    "this verb speaks the Teensy serial link (--kind teensy); for a USB CDC four-motor board use enable, estop, drive";
 
 /// Runs one of the board verbs (everything but sim, decode, encode, monitor, ping, info, loop-bench).
 fn board_verb(cmd: Cmd) -> Run {
@@ -986,7 +986,7 @@ fn board_verb(cmd: Cmd) -> Run {
             }
             expect_kind(link.kind, SerialKind::Serial, NOT_TEENSY)?;
             if let Some(flag) = pi.first_given() {
-                return Err(Failure::usage(format!("{flag} is an option of drive --kind pi-spi; this is a seed 001 drive (--kind serial): give --pwm")));
+                return Err(Failure::usage(format!("{flag} is an option of drive --kind pi-spi; this is a USB CDC four-motor drive (--kind serial): give --pwm")));
             }
             let pwm = pwm.ok_or_else(|| Failure::usage("drive --kind serial needs --pwm: the duties of motors 1 to 4, e.g. --pwm 300,-300,0,0"))?;
             let pwm = device::parse_list(&pwm, "--pwm").or_exit(Exit::Usage)?;

@@ -202,6 +202,55 @@ fn monitor_drops_what_the_port_held_before_it_opened() {
     assert_ne!(code, 0, "nothing fresh came: {err}");
 }
 
+/// Every verb of the CLI, from its own `--help`.
+fn verbs() -> Vec<String> {
+    let (_, top, _) = motorlink(&["--help"]);
+    top.lines()
+        .skip_while(|l| !l.starts_with("Commands:"))
+        .skip(1)
+        .take_while(|l| l.starts_with("  "))
+        .filter_map(|l| l.split_whitespace().next())
+        .filter(|v| *v != "help")
+        .map(str::to_string)
+        .collect()
+}
+
+#[test]
+fn help_names_links_and_faults_not_internal_labels() {
+    let verbs = verbs();
+    assert!(verbs.len() >= 15, "{verbs:?}");
+    let (_, top, _) = motorlink(&["--help"]);
+    let mut texts = vec![("motorlink".to_string(), top)];
+    for v in &verbs {
+        let (code, help, _) = motorlink(&[v, "--help"]);
+        assert_eq!(code, 0, "{v} --help");
+        texts.push((v.clone(), help));
+    }
+    for (verb, text) in texts {
+        let lower = text.to_lowercase();
+        for word in ["seed", "incident"] {
+            assert!(
+                !lower.contains(word),
+                "{verb} --help says '{word}': {}",
+                text.lines()
+                    .find(|l| l.to_lowercase().contains(word))
+                    .unwrap_or("")
+            );
+        }
+    }
+}
+
+#[test]
+fn sim_list_names_links_and_faults_not_internal_labels() {
+    let (code, out, _) = motorlink(&["sim", "--list"]);
+    assert_eq!(code, 0);
+    let lower = out.to_lowercase();
+    assert!(
+        !lower.contains("seed 0") && !lower.contains("incident"),
+        "{out}"
+    );
+}
+
 #[test]
 fn sim_with_a_shorter_duration_does_not_judge_what_needs_the_whole_run() {
     let dir = std::env::temp_dir().join(format!("motorlink-sim-{}", std::process::id()));

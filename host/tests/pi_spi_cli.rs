@@ -20,7 +20,7 @@ fn motorlink(args: &[&str]) -> (i32, String, String) {
 fn help_documents_the_pi_spi_verbs() {
     let (code, top, _) = motorlink(&["--help"]);
     assert_eq!(code, 0);
-    assert!(top.contains("seed 004"), "{top}");
+    assert!(top.contains("Raspberry Pi SPI link"), "{top}");
     for verb in ["ping", "monitor", "drive"] {
         let (code, help, _) = motorlink(&[verb, "--help"]);
         assert_eq!(code, 0);

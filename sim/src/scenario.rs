@@ -98,7 +98,7 @@ impl Wheel {
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(tag = "kind", rename_all = "snake_case", deny_unknown_fields)]
 pub enum Fault {
-    /// Incident-A: each command frame in the window is corrupted with probability `rate`
+    /// EMI on the link: each command frame in the window is corrupted with probability `rate`
     /// (random bit flips or a burst of random bytes, as EMI would).
     Corruption {
         /// Probability per frame.
@@ -113,7 +113,7 @@ pub enum Fault {
         #[serde(default)]
         feedback: bool,
     },
-    /// Incident-C: the host process pauses (garbage collection): no SPI transfers, no cmd_vel.
+    /// A host stall: the host process pauses (garbage collection): no SPI transfers, no cmd_vel.
     GcPause {
         /// Start, s.
         at_s: f64,

@@ -101,7 +101,7 @@ pub const IGNORED: [u8; TRANSFER_LEN] = [0; TRANSFER_LEN];
 
 /// The seed 004 options of `drive` (`--kind pi-spi`), as given on the command line.
 #[derive(Clone, Debug, Default, clap::Args)]
-#[command(next_help_heading = "Seed 004 Raspberry Pi SPI (drive --kind pi-spi)")]
+#[command(next_help_heading = "Raspberry Pi SPI link (drive --kind pi-spi)")]
 pub struct PiDriveArgs {
     /// Motor modes, one for all four or four (motors 0-3): off, passive_brake (or brake), pwm, mav,
     /// mtp. Default off.
@@ -482,9 +482,9 @@ fn transfer<D: Transport>(
 }
 
 /// A reply of 0x00 bytes only.
-const HINT_ZERO: &str = "every byte 0x00: no board is driving MISO (absent, unpowered, or its SPI2 DMA not running); check the wiring, the power, and that the seed 004 firmware runs";
+const HINT_ZERO: &str = "every byte 0x00: no board is driving MISO (absent, unpowered, or its SPI2 DMA not running); check the wiring, the power, and that the Raspberry Pi SPI link's firmware runs";
 /// A reply of 0xFF bytes only.
-const HINT_FF: &str = "every byte 0xFF: MISO is floating high, no board is answering; check the wiring, the chip select (PB12) and that the seed 004 firmware runs";
+const HINT_FF: &str = "every byte 0xFF: MISO is floating high, no board is answering; check the wiring, the chip select (PB12) and that the Raspberry Pi SPI link's firmware runs";
 /// Any other reply that does not decode.
 const HINT_VERSION: &str = "transferVersion is not 15: the firmware speaks another pi_buffer.h version, or the transfers are misaligned (reset the board)";
 
