@@ -27,6 +27,7 @@ use motorlink::cli::exit::{Exit, Failure, OrExit, Run};
 use motorlink::cli::pi;
 use motorlink::cli::{self, FrameKind};
 use motorlink::link::Link;
+use motorlink::loopstats::{self, Goal, LoopStats};
 use motorlink::pacing::Pacer;
 use motorlink::serial::{CdcLink, TeensyLink};
 use motorlink::transport::{NullTransport, SerialTransport, SpiTransport, Transport};
@@ -202,6 +203,8 @@ enum Cmd {
         /// Joints in a Teensy serial link's CmdMsg (--kind teensy), 1 to 16 (MAX_SUPPORTED_MTRS).
         #[arg(long, default_value_t = cli::DEFAULT_MOTORS)]
         motors: usize,
+        #[command(flatten)]
+        rt: RtArgs,
     },
     /// Exchange a few frames with a device and report round trips.
     ///
@@ -448,12 +451,65 @@ enum Cmd {
         #[arg(long)]
         json: bool,
     },
-    /// Measure the 1 kHz loop's period and deadline misses on this machine (no device needed).
+    /// Measure the original Python 1 kHz loop and the Rust bridge loop side by side on this machine.
+    ///
+    /// In one invocation, one after the other, each for --seconds: first the original Jetson
+    /// bridge's loop in Python (a script under host/scripts/, built into this binary and run
+    /// with --python: a time.sleep(0.001)-paced loop doing the callback's work, the transfer answered by
+    /// a fixed feedback frame), then the Rust bridge loop (absolute deadlines, the same work,
+    /// against a device that answers at once) on its own bridge thread. One after the other, not
+    /// at once: both loops on a shared machine at the same time would measure how they disturb
+    /// each other (the Rust loop busy-waits before each deadline), not each loop. No device is
+    /// needed.
+    ///
+    /// Per loop: periods, the share outside 1 ms +- 0.2 ms (the AMR SPI link's contract), skipped
+    /// deadlines (a period of p ms leaves floor(p) - 1 deadlines without a command), the
+    /// p50/p90/p99/p99.9/max period, and whether the loop kept the window; then the goal: Rust
+    /// with at least 10x fewer periods outside the window than Python (compared by share, since
+    /// the loops complete different numbers of periods). Exit 1 if the goal is not met, 69 if
+    /// Python cannot be run (give --python or --rust-only).
+    ///
+    /// --rt: the bridge thread asks for SCHED_FIFO at --rt-priority and mlockall(MCL_CURRENT |
+    /// MCL_FUTURE); --cpu N pins it to CPU N. Whatever is not permitted falls back with one
+    /// warning on stderr each.
     LoopBench {
-        /// How long, s (above 0).
+        /// How long each loop runs, s (above 0).
         #[arg(long, default_value_t = 60.0, allow_negative_numbers = true)]
         seconds: f64,
+        /// Print one JSON object instead of the table.
+        #[arg(long)]
+        json: bool,
+        /// Python interpreter for the original loop.
+        #[arg(long, default_value = "python3")]
+        python: String,
+        /// Run only the Rust bridge loop (no comparison).
+        #[arg(long)]
+        rust_only: bool,
+        #[command(flatten)]
+        rt: RtArgs,
     },
+}
+
+/// Real-time settings of a 1 kHz loop's thread (see `host/src/rt.rs`).
+#[derive(Args)]
+struct RtArgs {
+    /// Ask for SCHED_FIFO (at --rt-priority) and mlockall for the 1 kHz loop's thread; each
+    /// setting not permitted falls back with one warning.
+    #[arg(long)]
+    rt: bool,
+    /// SCHED_FIFO priority with --rt, 1 to 99.
+    #[arg(long, default_value_t = motorlink::rt::DEFAULT_PRIORITY)]
+    rt_priority: i32,
+    /// Pin the 1 kHz loop's thread to this CPU.
+    #[arg(long)]
+    cpu: Option<usize>,
+}
+
+impl RtArgs {
+    /// The checked options (a usage error otherwise).
+    fn options(&self) -> Result<motorlink::rt::RtOptions, Failure> {
+        motorlink::rt::RtOptions::new(self.rt, self.rt_priority, self.cpu).or_exit(Exit::Usage)
+    }
 }
 
 /// A duration from user input: negative or NaN is zero, too large is a year.
@@ -704,6 +760,7 @@ struct MonitorArgs<'a> {
     hz: Option<f64>,
     count: Option<u64>,
     motors: usize,
+    rt: &'a RtArgs,
 }
 
 /// `--motors`: 1 to the protocol's limit, checked before anything is opened.
@@ -734,6 +791,11 @@ fn monitor(a: &MonitorArgs<'_>) -> Run {
     let (device, kind, seconds, motors) = (a.device, a.kind, a.seconds, a.motors);
     let speed = a.speed.unwrap_or(default_speed(kind));
     if kind == Kind::PiSpi {
+        if a.rt.rt || a.rt.cpu.is_some() {
+            return Err(Failure::usage(
+                "--rt and --cpu are for the 1 kHz loop of --kind spi",
+            ));
+        }
         let plan = pi::MonitorPlan::new(a.hz.unwrap_or(pi::DEFAULT_HZ), seconds, a.count)
             .or_exit(Exit::Usage)?;
         let mut dev = SpiTransport::open(device, speed).or_exit(Exit::Unavailable)?;
@@ -743,6 +805,18 @@ fn monitor(a: &MonitorArgs<'_>) -> Run {
     }
     if a.hz.is_some() || a.count.is_some() {
         return Err(Failure::usage("--hz and --count are for --kind pi-spi"));
+    }
+    let rt = a.rt.options()?;
+    if kind != Kind::Spi && rt != motorlink::rt::RtOptions::default() {
+        return Err(Failure::usage(
+            "--rt and --cpu are for the 1 kHz loop of --kind spi",
+        ));
+    }
+    if kind == Kind::Spi {
+        // This thread runs the 1 kHz bridge loop below.
+        for w in motorlink::rt::apply(&rt).warnings {
+            eprintln!("{w}");
+        }
     }
     if kind == Kind::Teensy {
         check_motors(motors)?;
@@ -1108,30 +1182,202 @@ fn hex_argument(hex: String) -> Result<String, String> {
     Ok(text)
 }
 
-fn loop_bench(seconds: f64) -> Run {
-    check_seconds(seconds)?;
-    // The same work as on the robot (IK, encode, decode, checks), against a device that answers
-    // a valid feedback frame instantly.
-    let mut reply = [0u8; FRAME_LEN];
-    amr::encode_feedback(&MotorFeedback::default(), &mut reply);
-    let mut link = Link::new(
-        NullTransport {
-            reply: reply.to_vec(),
-        },
-        Bridge::new(BridgeConfig::DEFAULT),
-    );
-    link.pacer = Pacer::contract();
-    link.run_for(secs(seconds), |_| {}).or_exit(Exit::Io)?;
-    let s = &link.pacer.stats;
-    out!("{}", s.summary());
-    out!(
-        "{}",
-        serde_json::json!({"impl": "rust-absolute-deadline", "seconds": seconds, "periods": s.count,
-            "misses": s.misses, "miss_rate": s.miss_rate(), "mean_us": s.mean_us(), "std_us": s.std_us(),
-            "min_us": s.min_us, "max_us": s.max_us, "skipped": s.skipped})
-    );
-    Ok(Exit::Ok)
+/// The original loop, as the CLI runs it (`python3 - SECONDS` with this on standard input).
+const SEED_LOOP_PY: &str = include_str!("../scripts/seed_loop.py");
+
+/// One loop's result in `loop-bench`.
+struct Measured {
+    name: &'static str,
+    stats: LoopStats,
+    extra: Value,
 }
+
+/// Runs the original Python loop for `seconds` and returns its periods, µs.
+fn python_loop(python: &str, seconds: f64) -> Result<Vec<f64>, Failure> {
+    use std::io::Write as _;
+    let mut child = std::process::Command::new(python)
+        .arg("-")
+        .arg(seconds.to_string())
+        .stdin(std::process::Stdio::piped())
+        .stdout(std::process::Stdio::piped())
+        .spawn()
+        .map_err(|e| {
+            Failure::new(
+                Exit::Unavailable,
+                format!("cannot run {python}: {e}; give --python PATH, or --rust-only"),
+            )
+        })?;
+    if let Some(mut stdin) = child.stdin.take() {
+        stdin
+            .write_all(SEED_LOOP_PY.as_bytes())
+            .map_err(|e| format!("cannot hand the loop to {python}: {e}"))
+            .or_exit(Exit::Io)?;
+    }
+    let out = child
+        .wait_with_output()
+        .map_err(|e| format!("{python} failed: {e}"))
+        .or_exit(Exit::Io)?;
+    if !out.status.success() {
+        return Err(Failure::new(
+            Exit::Unavailable,
+            format!(
+                "{python} ended with {}; give --python PATH, or --rust-only",
+                out.status
+            ),
+        ));
+    }
+    let v: Value = serde_json::from_slice(&out.stdout)
+        .map_err(|e| format!("the Python loop printed no JSON: {e}"))
+        .or_exit(Exit::Io)?;
+    Ok(v.get("periods_us")
+        .and_then(Value::as_array)
+        .map(|a| a.iter().filter_map(Value::as_f64).collect())
+        .unwrap_or_default())
+}
+
+/// Runs the Rust bridge loop for `seconds` on its own thread with `rt`; returns the real-time
+/// report, the periods (µs) and the pacer's own skipped-deadline count.
+fn rust_loop(
+    seconds: f64,
+    rt: motorlink::rt::RtOptions,
+) -> Result<(motorlink::rt::RtReport, Vec<f64>, u64), Failure> {
+    let bridge = std::thread::Builder::new()
+        .name("bridge".into())
+        .spawn(move || {
+            let report = motorlink::rt::apply(&rt);
+            for w in &report.warnings {
+                eprintln!("{w}");
+            }
+            // The same work as on the robot (IK, encode, decode, checks), against a device that
+            // answers a valid feedback frame at once.
+            let mut reply = [0u8; FRAME_LEN];
+            amr::encode_feedback(&MotorFeedback::default(), &mut reply);
+            let mut link = Link::new(
+                NullTransport {
+                    reply: reply.to_vec(),
+                },
+                Bridge::new(BridgeConfig::DEFAULT),
+            );
+            link.pacer = Pacer::contract();
+            let expected = (seconds * 1000.0).ceil() as usize;
+            link.pacer
+                .keep_periods(expected.saturating_add(expected / 10));
+            link.run_for(secs(seconds), |_| {})
+                .map_err(|e| e.to_string())?;
+            let skipped = link.pacer.stats.skipped;
+            Ok::<_, String>((report, std::mem::take(&mut link.pacer.periods), skipped))
+        })
+        .map_err(|e| format!("cannot start the bridge thread: {e}"))
+        .or_exit(Exit::Io)?;
+    bridge
+        .join()
+        .map_err(|_| Failure::new(Exit::Io, "the bridge thread panicked"))?
+        .or_exit(Exit::Io)
+}
+
+fn loop_bench(seconds: f64, json: bool, python: &str, rust_only: bool, rt: &RtArgs) -> Run {
+    check_seconds(seconds)?;
+    let rt = rt.options()?;
+    let mut loops = Vec::new();
+    if !rust_only {
+        eprintln!("loop-bench: the Python loop for {seconds} s ...");
+        let periods = python_loop(python, seconds)?;
+        let stats = LoopStats::from_periods(&periods)
+            .ok_or_else(|| Failure::new(Exit::Io, "the Python loop measured no period"))?;
+        loops.push(Measured {
+            name: "python-sleep-1ms",
+            stats,
+            extra: serde_json::json!({"paced_by": "time.sleep(0.001) after the work"}),
+        });
+    }
+    eprintln!("loop-bench: the Rust bridge loop for {seconds} s ...");
+    let (report, periods, pacer_skipped) = rust_loop(seconds, rt)?;
+    let stats = LoopStats::from_periods(&periods)
+        .ok_or_else(|| Failure::new(Exit::Io, "the Rust loop measured no period"))?;
+    loops.push(Measured {
+        name: "rust-absolute-deadline",
+        stats,
+        extra: serde_json::json!({"paced_by": "absolute 1 ms deadlines (sleep, then spin the last 150 us)",
+            "pacer_skipped_deadlines": pacer_skipped, "rt": report}),
+    });
+    let goal = match loops.as_slice() {
+        [py, rs] => Some(loopstats::goal(&py.stats, &rs.stats)),
+        _ => None,
+    };
+    let order: Vec<&str> = loops.iter().map(|m| m.name).collect();
+    if json {
+        let list: Vec<Value> = loops
+            .iter()
+            .map(|m| {
+                serde_json::json!({"impl": m.name, "stats": m.stats,
+                    "keeps_window": m.stats.keeps_window(), "details": m.extra})
+            })
+            .collect();
+        out!(
+            "{}",
+            serde_json::json!({"seconds_each": seconds, "mode": "sequential", "order": order,
+                "why_sequential": SEQUENTIAL_WHY,
+                "window_us": {"nominal": loopstats::NOMINAL_US, "tolerance": loopstats::TOLERANCE_US},
+                "loops": list, "goal_factor": loopstats::GOAL_FACTOR, "goal": goal})
+        );
+    } else {
+        out!(
+            "loop-bench: {seconds} s each, one after the other ({}), window {} +- {} us",
+            order.join(", then "),
+            loopstats::NOMINAL_US,
+            loopstats::TOLERANCE_US
+        );
+        out!(
+            "{:<24} {:>8} {:>18} {:>8} {:>8} {:>8} {:>8} {:>8} {:>9}  window",
+            "loop",
+            "periods",
+            "outside",
+            "skipped",
+            "p50 us",
+            "p90 us",
+            "p99 us",
+            "p99.9 us",
+            "max us"
+        );
+        for m in &loops {
+            let s = &m.stats;
+            out!(
+                "{:<24} {:>8} {:>8} ({:>6.3} %) {:>8} {:>8.1} {:>8.1} {:>8.1} {:>8.1} {:>9.1}  {}",
+                m.name,
+                s.periods,
+                s.outside,
+                100.0 * s.outside_share,
+                s.skipped_deadlines,
+                s.p50_us,
+                s.p90_us,
+                s.p99_us,
+                s.p999_us,
+                s.max_us,
+                if s.keeps_window() { "kept" } else { "missed" }
+            );
+        }
+        let verdict = match goal {
+            None => "not judged (--rust-only)".to_string(),
+            Some(Goal::Met { factor: Some(f) }) => format!("met ({f:.1}x fewer by share)"),
+            Some(Goal::Met { factor: None }) => "met (Rust had no period outside)".into(),
+            Some(Goal::NotMet { factor: Some(f) }) => format!("NOT met ({f:.2}x)"),
+            Some(Goal::NotMet { factor: None }) => "NOT met".into(),
+            Some(Goal::NotMeasurable) => "not measurable (neither loop left the window)".into(),
+        };
+        out!(
+            "goal: Rust >= {}x fewer periods outside the window than Python: {verdict}",
+            loopstats::GOAL_FACTOR
+        );
+        out!("why one after the other: {SEQUENTIAL_WHY}");
+    }
+    Ok(match goal {
+        Some(Goal::NotMet { .. }) => Exit::Failed,
+        _ => Exit::Ok,
+    })
+}
+
+/// Why `loop-bench` runs the loops one after the other.
+const SEQUENTIAL_WHY: &str = "at the same time the two loops would share this machine's cores (the Rust loop busy-waits before each deadline, the Python one burns CPU in its callback) and measure how they disturb each other; one after the other, each meets the same machine alone";
 
 /// `decode`: the frame (or capture) as JSON; a capture without a frame is refused data.
 fn decode(frame: FrameKind, hex: String, motors: usize) -> Run {
@@ -1226,6 +1472,7 @@ fn main() -> ExitCode {
             hz,
             count,
             motors,
+            rt,
         } => monitor(&MonitorArgs {
             device: &device,
             kind,
@@ -1234,6 +1481,7 @@ fn main() -> ExitCode {
             hz,
             count,
             motors,
+            rt: &rt,
         }),
         Cmd::Ping {
             device,
@@ -1263,7 +1511,13 @@ fn main() -> ExitCode {
             timeout_ms,
             json,
         ),
-        Cmd::LoopBench { seconds } => loop_bench(seconds),
+        Cmd::LoopBench {
+            seconds,
+            json,
+            python,
+            rust_only,
+            rt,
+        } => loop_bench(seconds, json, &python, rust_only, &rt),
         verb => board_verb(verb),
     };
     match r {

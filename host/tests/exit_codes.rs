@@ -64,6 +64,47 @@ fn usage_errors_exit_64() {
         code(&["sim", "nominal", "--duration", "0", "--no-plots"]),
         USAGE
     );
+    // Real-time options: a priority SCHED_FIFO does not have, a CPU this machine does not have,
+    // and --rt on a link without a 1 kHz loop.
+    assert_eq!(
+        code(&[
+            "loop-bench",
+            "--seconds",
+            "0.01",
+            "--rt",
+            "--rt-priority",
+            "0"
+        ]),
+        USAGE
+    );
+    assert_eq!(
+        code(&["loop-bench", "--seconds", "0.01", "--cpu", "100000"]),
+        USAGE
+    );
+    assert_eq!(
+        code(&[
+            "monitor",
+            "/nonexistent/ttyACM9",
+            "--kind",
+            "serial",
+            "--rt"
+        ]),
+        USAGE
+    );
+}
+
+#[test]
+fn loop_bench_without_python_exits_69() {
+    assert_eq!(
+        code(&[
+            "loop-bench",
+            "--seconds",
+            "0.01",
+            "--python",
+            "/nonexistent/python3"
+        ]),
+        UNAVAILABLE
+    );
 }
 
 #[test]
