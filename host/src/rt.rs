@@ -190,12 +190,13 @@ mod tests {
                 cpu: None
             }
         );
+        let cpu = allowed_cpus()[0];
         assert_eq!(
-            RtOptions::new(false, 40, Some(0)).unwrap(),
+            RtOptions::new(false, 40, Some(cpu)).unwrap(),
             RtOptions {
                 fifo_priority: None,
                 lock_memory: false,
-                cpu: Some(0)
+                cpu: Some(cpu)
             }
         );
         for p in [0, 100, -1] {
@@ -222,7 +223,8 @@ mod tests {
         // Whether this machine permits them is not known here; what must hold either way: a
         // setting is applied or refused, and there is one warning per refusal, none otherwise.
         // The thread is the test's own and ends with it (SCHED_FIFO at the lowest priority).
-        let opts = RtOptions::new(false, FIFO_MIN, Some(0)).unwrap();
+        let cpu = allowed_cpus()[0];
+        let opts = RtOptions::new(false, FIFO_MIN, Some(cpu)).unwrap();
         let opts = RtOptions {
             fifo_priority: Some(FIFO_MIN),
             ..opts
