@@ -609,13 +609,9 @@ fn run_sim(
             .or_exit(Exit::Io)?;
         if plots {
             let svg = out.join(format!("{}.svg", sc.name));
-            report::plot(
-                &svg,
-                &format!("{}: {}", sc.name, short(&sc.description)),
-                &r,
-            )
-            .map_err(|e| format!("plot {}: {e}", svg.display()))
-            .or_exit(Exit::Io)?;
+            report::plot(&svg, &sc.name, &sc.description, &r)
+                .map_err(|e| format!("plot {}: {e}", svg.display()))
+                .or_exit(Exit::Io)?;
         }
         let failures = r.summary.check(sc);
         results.push((r.summary, failures));
@@ -636,11 +632,6 @@ fn run_sim(
         out.display()
     );
     Ok(results.iter().all(|(_, f)| f.is_empty()))
-}
-
-fn short(s: &str) -> String {
-    let first = s.split(". ").next().unwrap_or(s);
-    first.chars().take(90).collect()
 }
 
 fn open_spi(device: &str, speed: u32) -> Result<Box<dyn Transport>, Failure> {

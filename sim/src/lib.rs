@@ -23,6 +23,7 @@ pub mod host;
 pub mod measure;
 pub mod pi_spi;
 pub mod plant;
+pub mod plot;
 pub mod report;
 pub mod rng;
 pub mod runner;

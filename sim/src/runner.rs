@@ -79,6 +79,9 @@ pub struct Series {
     pub age: Vec<u16>,
     /// Robot speed, m/s.
     pub v: Vec<f64>,
+    /// Clock-sync error at each traced tick: the host's estimate of the MCU's latest timestamp
+    /// minus the truth, µs; NaN before the first estimate. Empty for profiles without clock sync.
+    pub clock_err_us: Vec<f64>,
 }
 
 /// What a run measured.
@@ -492,6 +495,8 @@ fn run_amr<H: HostModel>(
     let mut watch = Watch::new(mcu.out.mode);
     let mut clock_err_sum = 0.0;
     let mut clock_err_n = 0u64;
+    // The latest signed clock-sync error, µs, for the plot's clock panel.
+    let mut last_clock_err = f64::NAN;
     let mut seed_err_sum = 0.0;
     let mut seed_err_n = 0u64;
     let mut last_progress = 0.0;
@@ -595,6 +600,7 @@ fn run_amr<H: HostModel>(
                     let truth = HOST_EPOCH_US + true_t * 1e6 * host_rate;
                     let (ours, seed) = host.mcu_to_host_us(mcu_us);
                     if let Some(est) = ours {
+                        last_clock_err = est - truth;
                         let err = (est - truth).abs();
                         if t > 10.0 {
                             s.clock_err_max_us = Some(s.clock_err_max_us.unwrap_or(0.0).max(err));
@@ -725,6 +731,7 @@ fn run_amr<H: HostModel>(
                     series.applied[k].push(ap[k]);
                 }
                 series.v.push(plant.v);
+                series.clock_err_us.push(last_clock_err);
             }
             if due {
                 if let Some(w) = trace.row(t, out.mode, out.age, out.faults)? {
