@@ -12,28 +12,29 @@ use serde::{Deserialize, Serialize};
 use statemachine::{Estop, RejectReason};
 
 pub mod device;
+pub mod exit;
 pub mod info;
 pub mod pi;
 
-/// The frame kinds of every seed protocol.
+/// The frame kinds of every link.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
 pub enum FrameKind {
-    /// Seed 000 SPI command frame (Jetson → MCU), 64 bytes.
+    /// AMR SPI link command frame (Jetson → MCU), 64 bytes.
     AmrCommand,
-    /// Seed 000 SPI feedback frame (MCU → Jetson), 64 bytes.
+    /// AMR SPI link feedback frame (MCU → Jetson), 64 bytes.
     AmrFeedback,
-    /// Seed 000 SPI identity frame `McuInfo` (MCU → Jetson, in the feedback slot after a command
+    /// AMR SPI link identity frame `McuInfo` (MCU → Jetson, in the feedback slot after a command
     /// with request 1), 64 bytes.
     AmrInfo,
-    /// Seed 001 USB CDC / UART frame `AA 55 | id | len | payload | crc` (decode also takes a capture).
+    /// USB CDC four-motor link frame (USB CDC / UART) `AA 55 | id | len | payload | crc` (decode also takes a capture).
     Cdc,
-    /// Seed 004 Pi → STM32 `RxBuffer`, 179 bytes.
+    /// Raspberry Pi SPI link, Pi → STM32 `RxBuffer`, 179 bytes.
     PiRx,
-    /// Seed 004 STM32 → Pi `TxBuffer`, 167 bytes (or a whole 179-byte transfer).
+    /// Raspberry Pi SPI link, STM32 → Pi `TxBuffer`, 167 bytes (or a whole 179-byte transfer).
     PiTx,
-    /// Seed 003 legacy `CmdMsg` packet ending in `\n`, 21 + 4·motors bytes.
+    /// Teensy serial link legacy `CmdMsg` packet ending in `\n`, 21 + 4·motors bytes.
     TeensyLegacy,
-    /// Seed 003 robust `CmdMsg` frame: COBS(version | CmdMsg | CRC) 00 (decode also takes a capture).
+    /// Teensy serial link robust `CmdMsg` frame: COBS(version | CmdMsg | CRC) 00 (decode also takes a capture).
     TeensyRobust,
 }
 
@@ -280,7 +281,9 @@ impl CmdMsgJson {
     }
 }
 
-/// Calls `$f::<N>(args)` for the runtime motor count `$n` (1 ..= [`teensy::MAX_MOTORS`]).
+/// Calls `$f::<N>(args)` for the runtime motor count `$n` (1 ..= [`teensy::MAX_MOTORS`]); any other
+/// count is an `Err` naming the range, returned before `$f` runs.
+#[macro_export]
 macro_rules! with_motors {
     ($n:expr, $f:ident ( $($arg:expr),* )) => {
         match $n {
@@ -302,7 +305,7 @@ macro_rules! with_motors {
             16 => $f::<16>($($arg),*),
             other => Err(format!(
                 "--motors {other} is not supported; give 1 to {} (protocol::teensy::MAX_MOTORS)",
-                teensy::MAX_MOTORS
+                ::protocol::teensy::MAX_MOTORS
             )),
         }
     };
@@ -364,6 +367,54 @@ pub fn from_json<T: serde::de::DeserializeOwned>(json: &str) -> Result<T, String
     Ok(v)
 }
 
+/// [`from_json`] for a message with floating-point fields: a number that is not finite once
+/// converted to the field's type (1e40 in an `f32` becomes +Inf) is refused, naming the field, since
+/// a frame must never carry an infinity (the decoders and the board's validation refuse them).
+pub fn from_json_finite<T: serde::de::DeserializeOwned + Serialize>(
+    json: &str,
+) -> Result<T, String> {
+    let v: T = from_json(json)?;
+    let given: serde_json::Value = from_json(json)?;
+    // The value printed back: a non-finite float prints as null where the input held a number.
+    let back = serde_json::to_value(&v).map_err(|e| format!("cannot check the numbers: {e}"))?;
+    match lost_number(&given, &back, String::new()) {
+        None => Ok(v),
+        Some((path, n)) => Err(format!(
+            "field `{path}`: {n} is not finite as a 32-bit float (the largest magnitude is {:e}); a frame cannot carry an infinity, give a finite value",
+            f32::MAX
+        )),
+    }
+}
+
+/// The first path where `given` holds a number and `back` holds null, with that number.
+fn lost_number(
+    given: &serde_json::Value,
+    back: &serde_json::Value,
+    path: String,
+) -> Option<(String, String)> {
+    use serde_json::Value;
+    let join = |key: &str| {
+        if path.is_empty() {
+            key.to_string()
+        } else {
+            format!("{path}.{key}")
+        }
+    };
+    match (given, back) {
+        (Value::Number(n), Value::Null) => Some((path.clone(), n.to_string())),
+        (Value::Object(g), Value::Object(b)) => g.iter().find_map(|(k, gv)| {
+            b.get(k)
+                .and_then(|bv| lost_number(gv, bv, join(k.as_str())))
+        }),
+        (Value::Array(g), Value::Array(b)) => g
+            .iter()
+            .zip(b)
+            .enumerate()
+            .find_map(|(i, (gv, bv))| lost_number(gv, bv, format!("{path}[{i}]"))),
+        _ => None,
+    }
+}
+
 fn pretty<T: Serialize>(v: &T) -> Result<String, String> {
     serde_json::to_string_pretty(v).map_err(|e| format!("cannot print JSON: {e}"))
 }
@@ -393,38 +444,68 @@ fn exact<const L: usize>(bytes: &[u8], what: &str, hint: &str) -> Result<[u8; L]
         .map_err(|_| format!("{what} is exactly {L} bytes, got {}; {hint}", bytes.len()))
 }
 
-/// Decodes `hex` as a frame of `kind` and returns pretty JSON (see [`SHAPES`]).
+/// What [`decode_report`] found: the JSON to print, and for a capture that yielded no frame at all
+/// (only refused frames, garbage or an incomplete tail) the reason, which fails the run.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct Decoded {
+    /// Pretty JSON (see [`SHAPES`]).
+    pub json: String,
+    /// `Some(why)` when the bytes were a capture and not one frame in it decoded.
+    pub no_frame: Option<String>,
+}
+
+/// Decodes `hex` as a frame of `kind` and returns pretty JSON (see [`SHAPES`]). A capture without
+/// a single decoded frame still returns its JSON here; [`decode_report`] says it found none.
 pub fn decode(kind: FrameKind, hex: &str, motors: usize) -> Result<String, String> {
+    decode_report(kind, hex, motors).map(|d| d.json)
+}
+
+/// [`decode`], telling a capture that yielded frames from one that yielded none.
+pub fn decode_report(kind: FrameKind, hex: &str, motors: usize) -> Result<Decoded, String> {
     let bytes = parse_hex(hex)?;
+    let one = |r: Result<String, String>| {
+        r.map(|json| Decoded {
+            json,
+            no_frame: None,
+        })
+    };
     match kind {
         FrameKind::AmrCommand | FrameKind::AmrFeedback | FrameKind::AmrInfo => {
-            decode_amr(kind, &bytes)
+            one(decode_amr(kind, &bytes))
         }
         FrameKind::Cdc => decode_cdc(&bytes),
-        FrameKind::PiRx => decode_pi_rx(&bytes),
-        FrameKind::PiTx => decode_pi_tx(&bytes),
-        FrameKind::TeensyLegacy => with_motors!(motors, decode_teensy_legacy(&bytes)),
+        FrameKind::PiRx => one(decode_pi_rx(&bytes)),
+        FrameKind::PiTx => one(decode_pi_tx(&bytes)),
+        FrameKind::TeensyLegacy => one(with_motors!(motors, decode_teensy_legacy(&bytes))),
         FrameKind::TeensyRobust => with_motors!(motors, decode_teensy_robust(&bytes)),
     }
+}
+
+/// The reason a capture of `len` bytes yielded no frame: `refused` frames refused, `incomplete`
+/// bytes of an unfinished one at the end.
+fn no_frame(what: &str, len: usize, refused: u64, incomplete: usize) -> String {
+    format!(
+        "no frame decoded: the {len}-byte capture holds no valid {what} frame ({refused} refused, {incomplete} bytes of an incomplete one at the end); check the link kind (--frame), --motors, and that the capture starts at a frame boundary"
+    )
 }
 
 /// Encodes the JSON message `json` as a frame of `kind` and returns it in hex.
 pub fn encode(kind: FrameKind, json: &str, motors: usize) -> Result<String, String> {
     match kind {
         FrameKind::AmrCommand => {
-            let c: amr::MotorCommand = from_json(json)?;
+            let c: amr::MotorCommand = from_json_finite(json)?;
             let mut out = [0u8; amr::FRAME_LEN];
             amr::encode_command(&c, &mut out);
             Ok(to_hex(&out))
         }
         FrameKind::AmrFeedback => {
-            let f: amr::MotorFeedback = from_json(json)?;
+            let f: amr::MotorFeedback = from_json_finite(json)?;
             let mut out = [0u8; amr::FRAME_LEN];
             amr::encode_feedback(&f, &mut out);
             Ok(to_hex(&out))
         }
         FrameKind::AmrInfo => {
-            let i: amr::McuInfo = from_json(json)?;
+            let i: amr::McuInfo = from_json_finite(json)?;
             let mut out = [0u8; amr::FRAME_LEN];
             amr::encode_info(&i, &mut out);
             Ok(to_hex(&out))
@@ -436,13 +517,13 @@ pub fn encode(kind: FrameKind, json: &str, motors: usize) -> Result<String, Stri
             Ok(to_hex(out.get(..n).unwrap_or(&[])))
         }
         FrameKind::PiRx => {
-            let rx: pi_spi::RxBuffer = from_json(json)?;
+            let rx: pi_spi::RxBuffer = from_json_finite(json)?;
             let mut out = [0u8; pi_spi::RX_LEN];
             pi_spi::encode_rx(&rx, &mut out);
             Ok(to_hex(&out))
         }
         FrameKind::PiTx => {
-            let tx: pi_spi::TxBuffer = from_json(json)?;
+            let tx: pi_spi::TxBuffer = from_json_finite(json)?;
             let mut out = [0u8; pi_spi::TX_LEN];
             pi_spi::encode_tx(&tx, &mut out);
             Ok(to_hex(&out))
@@ -563,9 +644,14 @@ struct Capture<M: Serialize, S: Serialize> {
     incomplete_bytes: usize,
 }
 
-fn decode_cdc(bytes: &[u8]) -> Result<String, String> {
+fn decode_cdc(bytes: &[u8]) -> Result<Decoded, String> {
     match cdc::decode_frame(bytes) {
-        Ok(m) => return pretty(&CdcJson::from(m)),
+        Ok(m) => {
+            return Ok(Decoded {
+                json: pretty(&CdcJson::from(m))?,
+                no_frame: None,
+            })
+        }
         Err(cdc::Error::Framing) => {}
         Err(e) => return Err(cdc_error_detail(e, bytes)),
     }
@@ -587,16 +673,22 @@ fn decode_cdc(bytes: &[u8]) -> Result<String, String> {
         return Err(refused(
             RejectReason::Framing,
             &format!(
-                "no seed 001 frame in these {} bytes (no AA 55 start, or the last frame is incomplete: {} bytes wait for the rest); capture from a start of frame",
+                "no USB CDC frame in these {} bytes (no AA 55 start, or the last frame is incomplete: {} bytes wait for the rest); capture from a start of frame",
                 bytes.len(),
                 dec.buffered()
             ),
         ));
     }
-    pretty(&Capture {
-        results,
-        stats: dec.stats(),
-        incomplete_bytes: dec.buffered(),
+    let stats = dec.stats();
+    let refused = stats.crc_errors.saturating_add(stats.message_errors);
+    Ok(Decoded {
+        json: pretty(&Capture {
+            results,
+            stats,
+            incomplete_bytes: dec.buffered(),
+        })?,
+        no_frame: (stats.frames == 0)
+            .then(|| no_frame("USB CDC", bytes.len(), u64::from(refused), dec.buffered())),
     })
 }
 
@@ -760,7 +852,7 @@ fn robust_error<const N: usize>(frame: &[u8], reason: RejectReason) -> String {
     refused(reason, &detail)
 }
 
-fn decode_teensy_robust<const N: usize>(bytes: &[u8]) -> Result<String, String> {
+fn decode_teensy_robust<const N: usize>(bytes: &[u8]) -> Result<Decoded, String> {
     let zeros = bytes.iter().filter(|&&b| b == 0).count();
     if zeros == 0 {
         return Err(refused(
@@ -771,7 +863,10 @@ fn decode_teensy_robust<const N: usize>(bytes: &[u8]) -> Result<String, String> 
     if zeros == 1 && bytes.last() == Some(&0) {
         let m =
             teensy::CmdMsg::<N>::decode_robust(bytes).map_err(|r| robust_error::<N>(bytes, r))?;
-        return pretty(&CmdMsgJson::from(&m));
+        return Ok(Decoded {
+            json: pretty(&CmdMsgJson::from(&m))?,
+            no_frame: None,
+        });
     }
     // Several frames, or garbage: a capture.
     let mut dec = teensy::RobustDecoder::<N>::new();
@@ -789,10 +884,15 @@ fn decode_teensy_robust<const N: usize>(bytes: &[u8]) -> Result<String, String> 
         })
         .collect();
     let tail = bytes.iter().rev().take_while(|&&b| b != 0).count();
-    pretty(&Capture {
-        results,
-        stats: dec.stats(),
-        incomplete_bytes: tail,
+    let stats = dec.stats();
+    Ok(Decoded {
+        json: pretty(&Capture {
+            results,
+            stats,
+            incomplete_bytes: tail,
+        })?,
+        no_frame: (stats.frames == 0)
+            .then(|| no_frame("Teensy serial", bytes.len(), u64::from(stats.errors), tail)),
     })
 }
 

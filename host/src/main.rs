@@ -23,9 +23,11 @@ macro_rules! out {
 use clap::{Args, Parser, Subcommand, ValueEnum};
 use motorlink::bridge::{Bridge, BridgeConfig};
 use motorlink::cli::device::{self, CdcVerb, DrivePlan, MovePlan, SendHex, TeensyVerb};
+use motorlink::cli::exit::{Exit, Failure, OrExit, Run};
 use motorlink::cli::pi;
 use motorlink::cli::{self, FrameKind};
 use motorlink::link::Link;
+use motorlink::loopstats::{self, Goal, LoopStats};
 use motorlink::pacing::Pacer;
 use motorlink::serial::{CdcLink, TeensyLink};
 use motorlink::transport::{NullTransport, SerialTransport, SpiTransport, Transport};
@@ -41,7 +43,8 @@ use statemachine::Estop;
 #[command(
     name = "motorlink",
     version,
-    about = "Host side of the AMR motor controller: simulator, frame tools, device monitor, serial board verbs, and the Raspberry Pi SPI verbs of seed 004 (ping, monitor, drive --kind pi-spi)"
+    after_help = motorlink::cli::exit::TABLE,
+    about = "Host side of the AMR motor controller: simulator, frame tools, device monitor, serial board verbs, and the Raspberry Pi SPI link's verbs (ping, monitor, drive --kind pi-spi)"
 )]
 struct Cli {
     #[command(subcommand)]
@@ -50,24 +53,24 @@ struct Cli {
 
 #[derive(Clone, Copy, PartialEq, Eq, ValueEnum)]
 enum Kind {
-    /// Linux spidev (seed 000), 2 MHz mode 0.
+    /// The AMR SPI link (Linux spidev, 64-byte frames at 1 kHz), 2 MHz mode 0.
     Spi,
-    /// Serial / USB CDC speaking seed 001 (`AA 55` frames): PING, IMU, STATUS, ACK.
+    /// The USB CDC four-motor link (serial / USB CDC, `AA 55` frames): PING, IMU, STATUS, ACK.
     Serial,
-    /// Serial to a Teensy speaking seed 003 robust frames (COBS + CRC); monitor only listens.
+    /// The Teensy serial link (robust frames: COBS + CRC); monitor only listens.
     Teensy,
-    /// Raspberry Pi spidev to the STM32's SPI2 (seed 004): 179-byte full-duplex transfers, 2 MHz mode 0.
+    /// The Raspberry Pi SPI link (spidev to the STM32's SPI2): 179-byte full-duplex transfers, 2 MHz mode 0.
     PiSpi,
 }
 
 /// The serial link kinds of the board verbs.
 #[derive(Clone, Copy, PartialEq, Eq, ValueEnum)]
 enum SerialKind {
-    /// Seed 001 (`AA 55` frames): ping, enable, estop, drive, send-hex.
+    /// The USB CDC four-motor link (`AA 55` frames): ping, enable, estop, drive, send-hex.
     Serial,
-    /// Seed 003 robust frames: ping, move, cal, endeff, config, send-hex.
+    /// The Teensy serial link (robust frames): ping, move, cal, endeff, config, send-hex.
     Teensy,
-    /// Seed 004 over spidev (the device is /dev/spidevB.C): drive (and ping, monitor).
+    /// The Raspberry Pi SPI link over spidev (the device is /dev/spidevB.C): drive (and ping, monitor).
     PiSpi,
 }
 
@@ -111,10 +114,12 @@ started): every frame received ({\"message\":{..}}; a refused frame: {\"error\":
 {\"reason\":..}), and as the last line the result, with \"verdict\": \"done\" | \"refused\" | \"no_reply\".
 
 Exit status:
-  0  done: the board answered and did it (ACK result 0, echo cmd_success 1, replies came)
-  1  refused by the board (ACK result != 0, echo cmd_success 0)
-  2  error: bad argument (nothing is sent), the device cannot be opened, an I/O error
-  3  no reply within --wait-ms
+  0   done: the board answered and did it (ACK result 0, echo cmd_success 1, replies came)
+  1   refused by the board (ACK result != 0, echo cmd_success 0)
+  64  bad argument (checked before the device is opened: nothing is sent)
+  69  the device cannot be opened, or no reply within --wait-ms
+  74  I/O error during the run
+  (the whole table: motorlink --help)
 
 The device is opened exclusively in raw mode; bytes that arrived before the open are dropped, so
 each run sees only replies to itself. Several runs in sequence on one pty (QEMU -serial pty) work.";
@@ -128,7 +133,10 @@ enum Cmd {
         /// Output directory.
         #[arg(long, default_value = "out/sim")]
         out: PathBuf,
-        /// Override each scenario's duration, s.
+        /// Run each scenario for this long, s, instead of its own duration. Expectations that
+        /// depend on the scenario's own duration are then not judged, and listed as such after
+        /// the table: shorter, all but never_brake, max_corrupted_applied, max_servo_violations;
+        /// longer, those measured at the end (moving_at_end, final_mode, max_clock_error_us, ...).
         #[arg(long)]
         duration: Option<f64>,
         /// Skip the SVG plots.
@@ -144,9 +152,10 @@ enum Cmd {
         /// Frame type.
         #[arg(long, value_enum)]
         frame: FrameKind,
-        /// The bytes in hex (e.g. from a logic-analyser capture).
+        /// The bytes in hex (e.g. from a logic-analyser capture); `-` reads them from standard
+        /// input (any number of lines; spaces, ':' and ',' allowed).
         hex: String,
-        /// Motors in a seed 003 CmdMsg (MAX_SUPPORTED_MTRS), 1 to 16.
+        /// Joints in a Teensy serial link's CmdMsg (MAX_SUPPORTED_MTRS), 1 to 16.
         #[arg(long, default_value_t = cli::DEFAULT_MOTORS)]
         motors: usize,
     },
@@ -158,11 +167,15 @@ enum Cmd {
         frame: FrameKind,
         /// The message as JSON (field names as `decode` prints them; see --help).
         json: String,
-        /// Motors in a seed 003 CmdMsg (MAX_SUPPORTED_MTRS), 1 to 16.
+        /// Joints in a Teensy serial link's CmdMsg (MAX_SUPPORTED_MTRS), 1 to 16.
         #[arg(long, default_value_t = cli::DEFAULT_MOTORS)]
         motors: usize,
     },
     /// Run the 1 kHz bridge disarmed against a device and print feedback and diagnostics.
+    ///
+    /// --kind spi|serial|teensy: what the port held before the run is discarded, so every line is
+    /// news; if no valid frame arrives within --seconds, a warning on stderr and exit status 75
+    /// (try again: board off, unplugged, wrong --kind or baud rate).
     ///
     /// --kind pi-spi: transfers the board ignores (transferVersion 0) at --hz for --seconds or
     /// --count transfers, every TxBuffer received printed as a JSON line ({"transfer":k,"tx":{..}};
@@ -187,18 +200,24 @@ enum Cmd {
         /// Stop after this many transfers instead of --seconds (--kind pi-spi).
         #[arg(long)]
         count: Option<u64>,
-        /// Motors in a seed 003 CmdMsg (--kind teensy).
+        /// Joints in a Teensy serial link's CmdMsg (--kind teensy), 1 to 16 (MAX_SUPPORTED_MTRS).
         #[arg(long, default_value_t = cli::DEFAULT_MOTORS)]
         motors: usize,
+        #[command(flatten)]
+        rt: RtArgs,
     },
     /// Exchange a few frames with a device and report round trips.
     ///
-    /// --kind spi: seed 000 command/feedback exchanges, with the MCU time and the clock offset
-    /// (text lines). --kind serial: PING, answered by a STATUS (or an ACK of PING). --kind teensy:
-    /// ENDEFF_OFF, answered by its echo (seed 003 has no probe message; switching the end effector
-    /// off is the safe, idempotent round trip, but it does switch it off). Serial kinds print JSON
-    /// lines: {"ping":i,"round_trip_us":..,"reply":{..}} or {"ping":i,"no_reply_ms":..}, then the
-    /// verdict with the round-trip statistics; exit status 3 if nothing answered.
+    /// --kind spi: command/feedback exchanges, with the MCU time and the clock offset (text lines),
+    /// then the round trip's min/avg/max. --kind serial: PING, answered by a STATUS (or an ACK of
+    /// PING). --kind teensy: ENDEFF_OFF, answered by its echo (the Teensy serial link has no probe
+    /// message; switching the end effector off is the safe, idempotent round trip, but it does
+    /// switch it off). Before each probe the input is discarded, so the reply is the first
+    /// matching message that arrives after the probe: a periodic STATUS, or the late reply of an
+    /// earlier probe, is never counted. Serial kinds print JSON lines: {"ping":i,
+    /// "round_trip_us":..,"reply":{..}} or {"ping":i,"no_reply_ms":..}, then the verdict with
+    /// "round_trip_us":{"min","avg","max"} over the replies of the --count pings and
+    /// "discarded_bytes"; exit status 69 if nothing answered.
     ///
     /// --kind pi-spi: at least two transfers, 10 ms apart, of a buffer the board answers but
     /// ignores (every byte 0: transferVersion 0), so a ping never changes what the robot does. Lines
@@ -221,11 +240,11 @@ enum Cmd {
         /// How long to wait for each reply, ms (serial kinds).
         #[arg(long, default_value_t = 200)]
         wait_ms: u64,
-        /// Motors in a seed 003 CmdMsg (--kind teensy).
+        /// Joints in a Teensy serial link's CmdMsg (--kind teensy), 1 to 16.
         #[arg(long, default_value_t = cli::DEFAULT_MOTORS)]
         motors: usize,
     },
-    /// Seed 001: MOTOR_ENABLE on|off, wait for its ACK (exit 1 if the board refuses it).
+    /// USB CDC four-motor link: MOTOR_ENABLE on|off, wait for its ACK (exit 1 if the board refuses it).
     ///
     /// `on` asks the board to leave BRAKE; it does so only when fresh SET_MOTOR_PWM frames follow
     /// before its comm-loss threshold, so to drive use `drive --enable`, which sends both. The
@@ -239,7 +258,7 @@ enum Cmd {
         #[command(flatten)]
         link: SerialArgs,
     },
-    /// Seed 001: ESTOP engage|release, wait for its ACK.
+    /// USB CDC four-motor link: ESTOP engage|release, wait for its ACK.
     ///
     /// engage latches BRAKE at once. release clears this link's ESTOP; the board stays braked
     /// until re-armed (`drive --enable`). Last line as for `enable` (msg_id 3).
@@ -251,7 +270,7 @@ enum Cmd {
         #[command(flatten)]
         link: SerialArgs,
     },
-    /// Seed 001: send SET_MOTOR_PWM at a fixed rate for a while, then stop sending.
+    /// USB CDC four-motor link: send SET_MOTOR_PWM at a fixed rate for a while, then stop sending.
     ///
     /// Frames go out on absolute deadlines (--hz; the first at once) for --seconds; every STATUS,
     /// IMU and ACK received is printed. Then nothing more is sent: the board brakes on its own
@@ -260,7 +279,7 @@ enum Cmd {
     ///
     /// --enable: MOTOR_ENABLE 1 right after the first frame, its ACK awaited while the frames keep
     /// coming (the board keeps a re-arm only until the first frame, at most 249 ms); refused: stop sending, exit 1;
-    /// no ACK within --wait-ms: stop sending, exit 3.
+    /// no ACK within --wait-ms: stop sending, exit 69.
     ///
     /// First line {"sending":{..},"frames":..,"hz":..,"enable":..}; last line {"verdict":..,
     /// "frames_sent":..,"enable":{"reply":..,"round_trip_us":..}|null,"received":{"status":..,
@@ -268,19 +287,19 @@ enum Cmd {
     /// "last_status":{..}},"decoder":{..},"pacing":{..},"stopped_early":..}. Exit 3 also if a drive
     /// of 0.2 s or more received no valid frame at all (the board sends STATUS every 100 ms).
     ///
-    /// --kind pi-spi (seed 004, device /dev/spidevB.C): one transfer with the motor shutdown bit
+    /// --kind pi-spi (the Raspberry Pi SPI link, device /dev/spidevB.C): one transfer with the motor shutdown bit
     /// set and every motor OFF (carrying the one-shot updates --odom-reset, --kinematics,
     /// --pid-speed, each sent exactly once), then the command buffer (--modes, --targets, --goals,
     /// --servo-modes, --servo-pos; shutdown bits clear: the bit's 1->0 edge is the board's re-arm)
     /// at --hz (default 100) for --seconds, then one buffer with both shutdown bits set and every
     /// motor OFF; that last buffer is also sent on Ctrl-C (SIGINT, SIGTERM, SIGHUP) and after a
-    /// failed transfer. Arguments are checked before the device is opened (exit 2): an enabled
+    /// failed transfer. Arguments are checked before the device is opened (exit 64): an enabled
     /// servo's position must be 600..=2600, a pwm duty within +-399, --hz above 20.4 (the board
     /// brakes 49 ms after the last valid transfer). Lines: {"sending":{..},..}, then
     /// {"transfer":k,"tx":{..}} (every --every-th) or {"transfer":k,"error":..}, last
     /// {"verdict":..,"transfers":{"arm","command","shutdown"},"commanded":[..],"moved":[..],
     /// "decoded":..,"errors":..,"update_time":{..},"stale":..,"pacing":{..},"interrupted":..}.
-    /// Verdict: no_reply (exit 3) if update_time never advanced (no TxBuffer decoded, or a stale
+    /// Verdict: no_reply (exit 69) if update_time never advanced (no TxBuffer decoded, or a stale
     /// board); refused (exit 1) if commands ran for 0.2 s or more, some motor was commanded to move
     /// and none of those changed motor.position; done (exit 0) otherwise.
     #[command(after_long_help = VERB_HELP)]
@@ -307,10 +326,10 @@ enum Cmd {
         #[command(flatten)]
         pi: pi::PiDriveArgs,
     },
-    /// Seed 003: MTRS to absolute angles at a fixed rate (or once), checking every echo.
+    /// Teensy serial link: MTRS to absolute angles at a fixed rate (or once), checking every echo.
     ///
     /// Every echo must come back with cmd_success 1: a refusal stops the sending at once (exit 1),
-    /// an echo missing --wait-ms after its command stops it too (exit 3). cmd_success 1 means the
+    /// an echo missing --wait-ms after its command stops it too (exit 69). cmd_success 1 means the
     /// board took the command; the arm moves only once re-armed (--cal, or an earlier `cal` with
     /// MTRS frames kept fresh) and only while frames keep coming (it holds, then brakes, within
     /// 250 ms of the last).
@@ -351,7 +370,7 @@ enum Cmd {
         #[arg(long, default_value_t = cli::DEFAULT_MOTORS)]
         motors: usize,
     },
-    /// Seed 003: CAL, the explicit re-arm; wait for its echo.
+    /// Teensy serial link: CAL, the explicit re-arm; wait for its echo.
     ///
     /// The arm leaves BRAKE only when fresh MTRS frames follow before its comm-loss threshold: to
     /// move, use `move --cal`. Last line {"verdict":..,"sent":{..},"reply":{..},"round_trip_us":..}.
@@ -363,7 +382,7 @@ enum Cmd {
         #[arg(long, default_value_t = cli::DEFAULT_MOTORS)]
         motors: usize,
     },
-    /// Seed 003: ENDEFF_ON / ENDEFF_OFF, wait for the echo.
+    /// Teensy serial link: ENDEFF_ON / ENDEFF_OFF, wait for the echo.
     #[command(after_long_help = VERB_HELP)]
     Endeff {
         /// on or off.
@@ -375,7 +394,7 @@ enum Cmd {
         #[arg(long, default_value_t = cli::DEFAULT_MOTORS)]
         motors: usize,
     },
-    /// Seed 003: CONFIG, the joints' acceleration; wait for the echo (refused above the board's limit).
+    /// Teensy serial link: CONFIG, the joints' acceleration; wait for the echo (refused above the board's limit).
     #[command(after_long_help = VERB_HELP)]
     Config {
         #[command(flatten)]
@@ -403,17 +422,17 @@ enum Cmd {
         /// How long to listen after the write, ms.
         #[arg(long, default_value_t = 300)]
         listen_ms: u64,
-        /// Motors in a seed 003 CmdMsg (--kind teensy), 1 to 16.
+        /// Joints in a Teensy serial link's CmdMsg (--kind teensy), 1 to 16.
         #[arg(long, default_value_t = cli::DEFAULT_MOTORS)]
         motors: usize,
     },
-    /// Print the MCU's firmware identity and reset cause (seed 000 McuInfo), from a capture or live.
+    /// Print the MCU's firmware identity and reset cause (the AMR SPI link's McuInfo), from a capture or live.
     ///
     /// --capture FILE reads a binary file of concatenated 64-byte MISO frames (one per CS-low period,
     /// as a logic analyser or spidev records them) and prints every McuInfo frame in it. --device
     /// asks the MCU: it sends commands with request = 1 and the drive disabled (enable 0, speeds 0,
-    /// mode 0), one per millisecond, until an McuInfo comes back or --timeout-ms passes. Exit status
-    /// 2 with the reason if none is found.
+    /// mode 0), one per millisecond, until an McuInfo comes back or --timeout-ms passes. None found:
+    /// exit status 65 (capture; 66 if the file cannot be read) or 69 (device), with the reason.
     #[command(group(clap::ArgGroup::new("source").required(true).args(["capture", "device"])))]
     Info {
         /// Binary capture of feedback-slot frames (MISO), 64 bytes each, starting at a frame boundary.
@@ -432,7 +451,7 @@ enum Cmd {
         #[arg(long)]
         json: bool,
     },
-    /// Run the 1 kHz seed 000 bridge and record every exchange to MCAP (ROS 2) or CSV.
+    /// Run the 1 kHz bridge of the AMR SPI link and record every exchange to MCAP (ROS 2) or CSV.
     ///
     /// The bridge sends cmd_vel (--v m/s, --w rad/s) in every exchange for --seconds (2000
     /// exchanges for 2 s), armed at the start if either is not 0 (else the drive stays disabled
@@ -456,9 +475,9 @@ enum Cmd {
     /// name, odometry, arming state, clock sync, diagnostics; in --sim also the plant's truth).
     ///
     /// Last line on stdout: {"out":..,"exchanges":..,"feedback":..,"diagnostics":..}. Ctrl-C
-    /// (SIGINT, SIGTERM, SIGHUP) ends the recording early with a complete file. Exit 2 on a bad
-    /// argument (checked before the device is opened) or a failed exchange (the file is completed
-    /// up to it).
+    /// (SIGINT, SIGTERM, SIGHUP) ends the recording early with a complete file. Exit 64 on a bad
+    /// argument (checked before the device is opened), 69 if the device cannot be opened, 74 on a
+    /// failed exchange or write (the file is completed up to it).
     Record {
         /// spidev device of the AMR link (/dev/spidevB.C); none with --sim.
         device: Option<String>,
@@ -481,12 +500,65 @@ enum Cmd {
         #[arg(long = "w", default_value_t = 0.0, allow_negative_numbers = true)]
         w: f64,
     },
-    /// Measure the 1 kHz loop's period and deadline misses on this machine (no device needed).
+    /// Measure the original Python 1 kHz loop and the Rust bridge loop side by side on this machine.
+    ///
+    /// In one invocation, one after the other, each for --seconds: first the original Jetson
+    /// bridge's loop in Python (a script under host/scripts/, built into this binary and run
+    /// with --python: a time.sleep(0.001)-paced loop doing the callback's work, the transfer answered by
+    /// a fixed feedback frame), then the Rust bridge loop (absolute deadlines, the same work,
+    /// against a device that answers at once) on its own bridge thread. One after the other, not
+    /// at once: both loops on a shared machine at the same time would measure how they disturb
+    /// each other (the Rust loop busy-waits before each deadline), not each loop. No device is
+    /// needed.
+    ///
+    /// Per loop: periods, the share outside 1 ms +- 0.2 ms (the AMR SPI link's contract), skipped
+    /// deadlines (a period of p ms leaves floor(p) - 1 deadlines without a command), the
+    /// p50/p90/p99/p99.9/max period, and whether the loop kept the window; then the goal: Rust
+    /// with at least 10x fewer periods outside the window than Python (compared by share, since
+    /// the loops complete different numbers of periods). Exit 1 if the goal is not met, 69 if
+    /// Python cannot be run (give --python or --rust-only).
+    ///
+    /// --rt: the bridge thread asks for SCHED_FIFO at --rt-priority and mlockall(MCL_CURRENT |
+    /// MCL_FUTURE); --cpu N pins it to CPU N. Whatever is not permitted falls back with one
+    /// warning on stderr each.
     LoopBench {
-        /// How long, s.
-        #[arg(long, default_value_t = 60.0)]
+        /// How long each loop runs, s (above 0).
+        #[arg(long, default_value_t = 60.0, allow_negative_numbers = true)]
         seconds: f64,
+        /// Print one JSON object instead of the table.
+        #[arg(long)]
+        json: bool,
+        /// Python interpreter for the original loop.
+        #[arg(long, default_value = "python3")]
+        python: String,
+        /// Run only the Rust bridge loop (no comparison).
+        #[arg(long)]
+        rust_only: bool,
+        #[command(flatten)]
+        rt: RtArgs,
     },
+}
+
+/// Real-time settings of a 1 kHz loop's thread (see `host/src/rt.rs`).
+#[derive(Args)]
+struct RtArgs {
+    /// Ask for SCHED_FIFO (at --rt-priority) and mlockall for the 1 kHz loop's thread; each
+    /// setting not permitted falls back with one warning.
+    #[arg(long)]
+    rt: bool,
+    /// SCHED_FIFO priority with --rt, 1 to 99.
+    #[arg(long, default_value_t = motorlink::rt::DEFAULT_PRIORITY)]
+    rt_priority: i32,
+    /// Pin the 1 kHz loop's thread to this CPU.
+    #[arg(long)]
+    cpu: Option<usize>,
+}
+
+impl RtArgs {
+    /// The checked options (a usage error otherwise).
+    fn options(&self) -> Result<motorlink::rt::RtOptions, Failure> {
+        motorlink::rt::RtOptions::new(self.rt, self.rt_priority, self.cpu).or_exit(Exit::Usage)
+    }
 }
 
 /// A duration from user input: negative or NaN is zero, too large is a year.
@@ -494,21 +566,34 @@ fn secs(s: f64) -> Duration {
     Duration::try_from_secs_f64(s.max(0.0)).unwrap_or(Duration::from_secs(365 * 24 * 3600))
 }
 
-fn load_scenarios(args: &[String]) -> Result<Vec<Scenario>, String> {
+/// A scenario error with its exit status: a file that cannot be read is missing input, the rest
+/// is refused data.
+fn scenario_failure(e: &scenario::ScenarioError) -> Failure {
+    let exit = match e {
+        scenario::ScenarioError::Io(..) => Exit::NoInput,
+        _ => Exit::DataRefused,
+    };
+    Failure::new(exit, e.to_string())
+}
+
+fn load_scenarios(args: &[String]) -> Result<Vec<Scenario>, Failure> {
     if args.is_empty() {
-        return scenario::builtin().map_err(|e| e.to_string());
+        return scenario::builtin().map_err(|e| scenario_failure(&e));
     }
     args.iter()
         .map(|a| {
             if let Some((_, text)) = scenario::BUILTIN.iter().find(|(n, _)| n == a) {
-                Scenario::from_toml(text, a).map_err(|e| e.to_string())
+                Scenario::from_toml(text, a).map_err(|e| scenario_failure(&e))
             } else if Path::new(a).exists() {
-                Scenario::load(Path::new(a)).map_err(|e| e.to_string())
+                Scenario::load(Path::new(a)).map_err(|e| scenario_failure(&e))
             } else {
                 let names: Vec<&str> = scenario::BUILTIN.iter().map(|(n, _)| *n).collect();
-                Err(format!(
-                    "'{a}' is neither a scenario file nor a built-in scenario ({})",
-                    names.join(", ")
+                Err(Failure::new(
+                    Exit::NoInput,
+                    format!(
+                        "'{a}' is neither a scenario file nor a built-in scenario ({})",
+                        names.join(", ")
+                    ),
                 ))
             }
         })
@@ -520,27 +605,48 @@ fn run_sim(
     out: &Path,
     duration: Option<f64>,
     plots: bool,
-) -> Result<bool, String> {
-    let mut scenarios = load_scenarios(args)?;
+) -> Result<bool, Failure> {
     if let Some(d) = duration {
         if !(d.is_finite() && d > 0.0) {
-            return Err("--duration must be a positive number of seconds".into());
-        }
-        for s in &mut scenarios {
-            s.duration_s = d;
+            return Err(Failure::usage(
+                "--duration must be a positive number of seconds",
+            ));
         }
     }
+    // With --duration, what depends on a scenario's own duration is not judged (and said so).
+    let runs: Vec<(Scenario, Vec<&str>, f64)> = load_scenarios(args)?
+        .into_iter()
+        .map(|sc| {
+            let own = sc.duration_s;
+            let (sc, not_judged) = match duration {
+                Some(d) => sc.with_duration(d),
+                None => (sc, Vec::new()),
+            };
+            (sc, not_judged, own)
+        })
+        .collect();
     std::fs::create_dir_all(out)
-        .map_err(|e| format!("cannot create {}: {e}; choose another --out", out.display()))?;
+        .map_err(|e| format!("cannot create {}: {e}; choose another --out", out.display()))
+        .or_exit(Exit::Io)?;
     let mut results = Vec::new();
-    for sc in &scenarios {
+    let mut unjudged = String::new();
+    for (sc, not_judged, own) in &runs {
+        if !not_judged.is_empty() {
+            unjudged.push_str(&format!(
+                "not judged {}: {} (they depend on the scenario's own duration, {own} s; this run: {} s)\n",
+                sc.name,
+                not_judged.join(", "),
+                sc.duration_s
+            ));
+        }
         eprintln!(
             "running {} ({} s simulated): {}",
             sc.name, sc.duration_s, sc.description
         );
         let trace_path = out.join(format!("{}.csv", sc.name));
         let file = std::fs::File::create(&trace_path)
-            .map_err(|e| format!("cannot write {}: {e}", trace_path.display()))?;
+            .map_err(|e| format!("cannot write {}: {e}", trace_path.display()))
+            .or_exit(Exit::Io)?;
         let mut w = std::io::BufWriter::new(file);
         let mut host = SimHost::new();
         let opts = sim::RunOptions {
@@ -548,20 +654,25 @@ fn run_sim(
             keep_series: plots,
         };
         let r = sim::run(sc, &mut host, opts, Some(&mut w))
-            .map_err(|e| format!("writing {}: {e}", trace_path.display()))?;
+            .map_err(|e| format!("writing {}: {e}", trace_path.display()))
+            .or_exit(Exit::Io)?;
         if plots {
             let svg = out.join(format!("{}.svg", sc.name));
             report::plot(&svg, &sc.name, &sc.description, &r)
-                .map_err(|e| format!("plot {}: {e}", svg.display()))?;
+                .map_err(|e| format!("plot {}: {e}", svg.display()))
+                .or_exit(Exit::Io)?;
         }
         let failures = r.summary.check(sc);
         results.push((r.summary, failures));
     }
-    let table = report::table(&results);
+    let mut table = report::table(&results);
+    table.push_str(&unjudged);
     print!("{table}");
     let write = |name: &str, text: &str| {
         let p = out.join(name);
-        std::fs::write(&p, text).map_err(|e| format!("cannot write {}: {e}", p.display()))
+        std::fs::write(&p, text)
+            .map_err(|e| format!("cannot write {}: {e}", p.display()))
+            .or_exit(Exit::Io)
     };
     write("summary.txt", &table)?;
     write("summary.csv", &report::csv(&results))?;
@@ -572,32 +683,34 @@ fn run_sim(
     Ok(results.iter().all(|(_, f)| f.is_empty()))
 }
 
-fn open_spi(device: &str, speed: u32) -> Result<Box<dyn Transport>, String> {
+fn open_spi(device: &str, speed: u32) -> Result<Box<dyn Transport>, Failure> {
     Ok(Box::new(
-        SpiTransport::open(device, speed).map_err(|e| e.to_string())?,
+        SpiTransport::open(device, speed).or_exit(Exit::Unavailable)?,
     ))
 }
 
-fn open_serial(device: &str, baud: u32) -> Result<SerialTransport, String> {
-    SerialTransport::open(device, baud, Duration::from_millis(20)).map_err(|e| e.to_string())
+fn open_serial(device: &str, baud: u32) -> Result<SerialTransport, Failure> {
+    SerialTransport::open(device, baud, Duration::from_millis(20)).or_exit(Exit::Unavailable)
 }
 
 fn elapsed_ms(t0: Instant) -> u64 {
     u64::try_from(t0.elapsed().as_millis()).unwrap_or(u64::MAX)
 }
 
-/// Seed 001: PING every 100 ms, print every received message with the ladder event it maps to.
-fn monitor_cdc(device: &str, baud: u32, seconds: f64) -> Result<(), String> {
+/// USB CDC four-motor link: PING every 100 ms, print every received message with the ladder event it maps to.
+fn monitor_cdc(device: &str, baud: u32, seconds: f64) -> Run {
     let mut link = CdcLink::new(open_serial(device, baud)?);
+    // Bytes that arrived before this run are not news: drop them, so t_ms 0 is a fresh frame.
+    link.discard_input().or_exit(Exit::Io)?;
     let t0 = Instant::now();
     let end = t0.checked_add(secs(seconds)).unwrap_or(t0);
     let mut last_ping: Option<Instant> = None;
     while Instant::now() < end {
         if last_ping.is_none_or(|t| t.elapsed() >= Duration::from_millis(100)) {
-            link.send(&cdc::Message::Ping).map_err(|e| e.to_string())?;
+            link.send(&cdc::Message::Ping).or_exit(Exit::Io)?;
             last_ping = Some(Instant::now());
         }
-        for m in link.poll().map_err(|e| e.to_string())? {
+        for m in link.poll().or_exit(Exit::Io)? {
             let event = m.to_event().map(|e| format!("{e:?}"));
             out!(
                 "{}",
@@ -612,20 +725,37 @@ fn monitor_cdc(device: &str, baud: u32, seconds: f64) -> Result<(), String> {
             );
         }
     }
-    eprintln!(
-        "{}",
-        serde_json::json!({"device": device, "stats": link.stats()})
-    );
-    Ok(())
+    let stats = link.stats();
+    eprintln!("{}", serde_json::json!({"device": device, "stats": stats}));
+    silence(device, seconds, u64::from(stats.frames))
 }
 
-/// Seed 003: listen and print every robust frame received.
-fn monitor_teensy<const N: usize>(device: &str, baud: u32, seconds: f64) -> Result<(), String> {
+/// The end of a monitor run: `frames` frames decoded in `seconds`; none is a warning and
+/// [`Exit::Temporary`].
+fn silence(device: &str, seconds: f64, frames: u64) -> Run {
+    if frames > 0 {
+        return Ok(Exit::Ok);
+    }
+    eprintln!(
+        "warning: no frame from {device} in {seconds} s: check that the board runs and is connected, the link kind (--kind) and the baud rate"
+    );
+    Ok(Exit::Temporary)
+}
+
+/// Teensy serial link: listen and print every robust frame received. (The outer `Result` is the motor count's,
+/// for `with_motors!`; it is checked before this runs.)
+fn monitor_teensy<const N: usize>(device: &str, baud: u32, seconds: f64) -> Result<Run, String> {
+    Ok(monitor_teensy_n::<N>(device, baud, seconds))
+}
+
+fn monitor_teensy_n<const N: usize>(device: &str, baud: u32, seconds: f64) -> Run {
     let mut link = TeensyLink::<_, N>::new(open_serial(device, baud)?);
+    // Bytes that arrived before this run are not news: drop them, so t_ms 0 is a fresh frame.
+    link.discard_input().or_exit(Exit::Io)?;
     let t0 = Instant::now();
     let end = t0.checked_add(secs(seconds)).unwrap_or(t0);
     while Instant::now() < end {
-        for m in link.poll().map_err(|e| e.to_string())? {
+        for m in link.poll().or_exit(Exit::Io)? {
             out!(
                 "{}",
                 serde_json::json!({"t_ms": elapsed_ms(t0), "message": cli::CmdMsgJson::from(&m)})
@@ -638,11 +768,9 @@ fn monitor_teensy<const N: usize>(device: &str, baud: u32, seconds: f64) -> Resu
             );
         }
     }
-    eprintln!(
-        "{}",
-        serde_json::json!({"device": device, "stats": link.stats()})
-    );
-    Ok(())
+    let stats = link.stats();
+    eprintln!("{}", serde_json::json!({"device": device, "stats": stats}));
+    silence(device, seconds, u64::from(stats.frames))
 }
 
 struct Boxed(Box<dyn Transport>);
@@ -672,43 +800,77 @@ struct MonitorArgs<'a> {
     hz: Option<f64>,
     count: Option<u64>,
     motors: usize,
+    rt: &'a RtArgs,
 }
 
-fn monitor(a: &MonitorArgs<'_>) -> Result<u8, String> {
+/// `--motors`: 1 to the protocol's limit, checked before anything is opened.
+fn check_motors(motors: usize) -> Result<(), Failure> {
+    if (1..=protocol::teensy::MAX_MOTORS).contains(&motors) {
+        Ok(())
+    } else {
+        Err(Failure::usage(format!(
+            "--motors {motors} is not supported; give 1 to {} (protocol::teensy::MAX_MOTORS)",
+            protocol::teensy::MAX_MOTORS
+        )))
+    }
+}
+
+/// `--seconds` of a run: above 0, finite, at most a day.
+fn check_seconds(seconds: f64) -> Result<(), Failure> {
+    if seconds.is_finite() && seconds > 0.0 && seconds <= device::MAX_SECONDS {
+        Ok(())
+    } else {
+        Err(Failure::usage(format!(
+            "--seconds {seconds}: give a duration above 0 and at most {} s",
+            device::MAX_SECONDS
+        )))
+    }
+}
+
+fn monitor(a: &MonitorArgs<'_>) -> Run {
     let (device, kind, seconds, motors) = (a.device, a.kind, a.seconds, a.motors);
     let speed = a.speed.unwrap_or(default_speed(kind));
     if kind == Kind::PiSpi {
-        let plan = pi::MonitorPlan::new(a.hz.unwrap_or(pi::DEFAULT_HZ), seconds, a.count)?;
-        let mut dev = SpiTransport::open(device, speed).map_err(|e| e.to_string())?;
-        let v = with_stop(|stop, sink| pi::run_monitor(&mut dev, &plan, stop, sink))?;
-        return Ok(v.exit_code());
+        if a.rt.rt || a.rt.cpu.is_some() {
+            return Err(Failure::usage(
+                "--rt and --cpu are for the 1 kHz loop of --kind spi",
+            ));
+        }
+        let plan = pi::MonitorPlan::new(a.hz.unwrap_or(pi::DEFAULT_HZ), seconds, a.count)
+            .or_exit(Exit::Usage)?;
+        let mut dev = SpiTransport::open(device, speed).or_exit(Exit::Unavailable)?;
+        let v = with_stop(|stop, sink| pi::run_monitor(&mut dev, &plan, stop, sink))
+            .or_exit(Exit::Io)?;
+        return Ok(v.into());
     }
     if a.hz.is_some() || a.count.is_some() {
-        return Err("--hz and --count are for --kind pi-spi".into());
+        return Err(Failure::usage("--hz and --count are for --kind pi-spi"));
     }
-    monitor_other(device, kind, speed, seconds, motors).map(|()| 0)
+    let rt = a.rt.options()?;
+    if kind != Kind::Spi && rt != motorlink::rt::RtOptions::default() {
+        return Err(Failure::usage(
+            "--rt and --cpu are for the 1 kHz loop of --kind spi",
+        ));
+    }
+    if kind == Kind::Spi {
+        // This thread runs the 1 kHz bridge loop below.
+        for w in motorlink::rt::apply(&rt).warnings {
+            eprintln!("{w}");
+        }
+    }
+    if kind == Kind::Teensy {
+        check_motors(motors)?;
+    }
+    monitor_other(device, kind, speed, seconds, motors)
 }
 
-fn monitor_other(
-    device: &str,
-    kind: Kind,
-    speed: u32,
-    seconds: f64,
-    motors: usize,
-) -> Result<(), String> {
+fn monitor_other(device: &str, kind: Kind, speed: u32, seconds: f64, motors: usize) -> Run {
     match kind {
         Kind::Spi | Kind::PiSpi => {}
         Kind::Serial => return monitor_cdc(device, speed, seconds),
         Kind::Teensy => {
-            return match motors {
-                1 => monitor_teensy::<1>(device, speed, seconds),
-                2 => monitor_teensy::<2>(device, speed, seconds),
-                3 => monitor_teensy::<3>(device, speed, seconds),
-                4 => monitor_teensy::<4>(device, speed, seconds),
-                6 => monitor_teensy::<6>(device, speed, seconds),
-                8 => monitor_teensy::<8>(device, speed, seconds),
-                n => Err(format!("--motors {n}: monitor supports 1, 2, 3, 4, 6, 8")),
-            }
+            return motorlink::with_motors!(motors, monitor_teensy(device, speed, seconds))
+                .or_exit(Exit::Usage)?;
         }
     }
     let t = open_spi(device, speed)?;
@@ -721,7 +883,7 @@ fn monitor_other(
         .checked_add(secs(seconds))
         .unwrap_or_else(std::time::Instant::now);
     while std::time::Instant::now() < end {
-        let diags = link.cycle().map_err(|e| e.to_string())?;
+        let diags = link.cycle().or_exit(Exit::Io)?;
         for (t, d) in diags {
             out!("{}", serde_json::json!({"t_us": t, "diagnostic": d}));
         }
@@ -738,7 +900,12 @@ fn monitor_other(
         }
     }
     eprintln!("loop: {}", link.pacer.stats.summary());
-    Ok(())
+    let frames = link
+        .bridge
+        .stats
+        .feedback_ok
+        .saturating_add(link.bridge.stats.info_frames);
+    silence(device, seconds, frames)
 }
 
 /// `record`: checks every argument before the device is opened.
@@ -749,19 +916,19 @@ fn record(
     speed: u32,
     seconds: f64,
     (v, w): (f64, f64),
-) -> Result<u8, String> {
+) -> Run {
     use motorlink::record::{self, Format, RecordConfig, RecordPlan};
-    let plan = RecordPlan::new(seconds, v, w).map_err(|e| e.to_string())?;
-    Format::from_path(out).map_err(|e| e.to_string())?;
+    let plan = RecordPlan::new(seconds, v, w).map_err(|e| Failure::usage(e.to_string()))?;
+    Format::from_path(out).map_err(|e| Failure::usage(e.to_string()))?;
     let summary = match (sim, device) {
         (true, None) => {
-            let mut signals = pi::Signals::block()?;
+            let mut signals = pi::Signals::block().or_exit(Exit::Io)?;
             record::record_sim(out, &plan, RecordConfig::default(), &mut || {
                 signals.received()
             })
         }
         (false, Some(dev)) => {
-            let mut signals = pi::Signals::block()?;
+            let mut signals = pi::Signals::block().or_exit(Exit::Io)?;
             let t = open_spi(dev, speed)?;
             let mut link = Link::new(Boxed(t), Bridge::new(BridgeConfig::DEFAULT));
             let origin = std::time::SystemTime::now()
@@ -774,15 +941,17 @@ fn record(
             record::record_link(&mut link, out, &plan, cfg, &mut || signals.received())
         }
         (true, Some(d)) => {
-            return Err(format!(
+            return Err(Failure::usage(format!(
                 "record: give a device or --sim, not both (got {d} and --sim)"
-            ))
+            )))
         }
         (false, None) => {
-            return Err("record: give the AMR link's device (/dev/spidevB.C) or --sim".into())
+            return Err(Failure::usage(
+                "record: give the AMR link's device (/dev/spidevB.C) or --sim",
+            ))
         }
     }
-    .map_err(|e| e.to_string())?;
+    .map_err(|e| Failure::new(Exit::Io, e.to_string()))?;
     out!(
         "{}",
         serde_json::json!({
@@ -792,7 +961,7 @@ fn record(
             "diagnostics": summary.diagnostics,
         })
     );
-    Ok(0)
+    Ok(Exit::Ok)
 }
 
 /// What `ping` was asked.
@@ -805,30 +974,34 @@ struct PingArgs<'a> {
     motors: usize,
 }
 
-fn ping(a: &PingArgs<'_>) -> Result<u8, String> {
+fn ping(a: &PingArgs<'_>) -> Run {
     let (device, count) = (a.device, a.count);
     let speed = a.speed.unwrap_or(default_speed(a.kind));
     match a.kind {
         Kind::Spi => {}
         Kind::PiSpi => {
-            let mut dev = SpiTransport::open(device, speed).map_err(|e| e.to_string())?;
-            return Ok(pi::run_ping(&mut dev, count, &mut print_line)?.exit_code());
+            let mut dev = SpiTransport::open(device, speed).or_exit(Exit::Unavailable)?;
+            let v = pi::run_ping(&mut dev, count, &mut print_line).or_exit(Exit::Io)?;
+            return Ok(v.into());
         }
         Kind::Serial => {
             let port = open_serial(device, speed)?;
-            let v = device::run_cdc(port, &CdcVerb::Ping { count }, a.wait, &mut print_line)?;
-            return Ok(v.exit_code());
+            let v = device::run_cdc(port, &CdcVerb::Ping { count }, a.wait, &mut print_line)
+                .or_exit(Exit::Io)?;
+            return Ok(v.into());
         }
         Kind::Teensy => {
+            check_motors(a.motors)?;
             let port = open_serial(device, speed)?;
             let verb = TeensyVerb::Ping { count };
-            let v = device::run_teensy(port, a.motors, &verb, a.wait, &mut print_line)?;
-            return Ok(v.exit_code());
+            let v = device::run_teensy(port, a.motors, &verb, a.wait, &mut print_line)
+                .or_exit(Exit::Io)?;
+            return Ok(v.into());
         }
     }
     let t = open_spi(device, speed)?;
     let mut link = Link::new(Boxed(t), Bridge::new(BridgeConfig::DEFAULT));
-    let mut ok = 0u32;
+    let mut rtts: Vec<u64> = Vec::new();
     for i in 0..count {
         let t0 = link.now_us();
         let r = link.cycle();
@@ -836,7 +1009,7 @@ fn ping(a: &PingArgs<'_>) -> Result<u8, String> {
         match r {
             Ok(_) => match link.bridge.last_feedback {
                 Some(fb) => {
-                    ok = ok.saturating_add(1);
+                    rtts.push(t1.saturating_sub(t0));
                     out!(
                         "{i}: {} us, MCU time {} us, mode {}, faults {:#06x}, offset estimate {:?} us",
                         t1.saturating_sub(t0),
@@ -851,12 +1024,19 @@ fn ping(a: &PingArgs<'_>) -> Result<u8, String> {
             Err(e) => out!("{i}: {e}"),
         }
     }
-    if ok == 0 {
-        return Err(format!(
-            "no valid reply from {device} in {count} exchanges: check wiring, SPI mode 0, and that the firmware runs"
-        ));
+    if let (Some(min), Some(max)) = (rtts.iter().min(), rtts.iter().max()) {
+        let avg = rtts.iter().sum::<u64>() as f64 / rtts.len() as f64;
+        out!(
+            "round trip over {} of {count} exchanges: min {min} us, avg {avg:.0} us, max {max} us",
+            rtts.len()
+        );
     }
-    Ok(0)
+    if rtts.is_empty() {
+        return Err(Failure::new(Exit::Unavailable, format!(
+            "no valid reply from {device} in {count} exchanges: check wiring, SPI mode 0, and that the firmware runs"
+        )));
+    }
+    Ok(Exit::Ok)
 }
 
 /// Prints one JSON line of a board verb.
@@ -865,7 +1045,7 @@ fn print_line(v: Value) {
 }
 
 /// Runs `verb` with a stop flag raised by SIGINT, SIGTERM, SIGHUP or a closed standard output, and a
-/// sink that never exits the process: a paced seed 004 verb must end with its last buffer and line.
+/// sink that never exits the process: a paced Raspberry Pi SPI verb must end with its last buffer and line.
 fn with_stop(
     verb: impl FnOnce(
         &mut dyn FnMut() -> bool,
@@ -891,49 +1071,63 @@ fn pi_drive(
     args: &pi::PiDriveArgs,
     hz: Option<f64>,
     seconds: f64,
-) -> Result<u8, String> {
+) -> Run {
     if pwm_given {
-        return Err("--pwm is the seed 001 drive's; for --kind pi-spi give --modes pwm --targets D (duty -399..=399); nothing was sent".into());
+        return Err(Failure::usage("--pwm is the USB CDC four-motor drive's; for --kind pi-spi give --modes pwm --targets D (duty -399..=399); nothing was sent"));
     }
     let speed = args.speed.unwrap_or(default_speed(Kind::PiSpi));
-    let open = || SpiTransport::open(&link.device, speed).map_err(|e| e.to_string());
     let hz = hz.unwrap_or(pi::DEFAULT_HZ);
-    let v = with_stop(|stop, sink| pi::drive(args, hz, seconds, open, stop, sink))?;
-    Ok(v.exit_code())
+    // The same check pi::drive makes before it opens the device: a bad argument is a usage error.
+    pi::PiDrivePlan::new(args, hz, seconds).or_exit(Exit::Usage)?;
+    let open_failed = std::cell::Cell::new(false);
+    let open = || {
+        SpiTransport::open(&link.device, speed).map_err(|e| {
+            open_failed.set(true);
+            e.to_string()
+        })
+    };
+    match with_stop(|stop, sink| pi::drive(args, hz, seconds, open, stop, sink)) {
+        Ok(v) => Ok(v.into()),
+        Err(e) if open_failed.get() => Err(Failure::new(Exit::Unavailable, e)),
+        Err(e) => Err(Failure::new(Exit::Io, e)),
+    }
 }
 
 /// Checks that a verb's `--kind` is the protocol it speaks.
-fn expect_kind(kind: Option<SerialKind>, want: SerialKind, instead: &str) -> Result<(), String> {
+fn expect_kind(kind: Option<SerialKind>, want: SerialKind, instead: &str) -> Result<(), Failure> {
     match kind {
-        Some(SerialKind::PiSpi) if want != SerialKind::PiSpi => Err(NOT_PI.into()),
-        Some(k) if k != want => Err(instead.to_string()),
+        Some(SerialKind::PiSpi) if want != SerialKind::PiSpi => Err(Failure::usage(NOT_PI)),
+        Some(k) if k != want => Err(Failure::usage(instead)),
         _ => Ok(()),
     }
 }
 
-/// Opens the device of a board verb and runs a seed 001 verb on it.
-fn cdc_verb(link: &SerialArgs, verb: &CdcVerb) -> Result<u8, String> {
+/// Opens the device of a board verb and runs a USB CDC four-motor link verb on it.
+fn cdc_verb(link: &SerialArgs, verb: &CdcVerb) -> Run {
     let port = open_serial(&link.device, link.baud)?;
     let wait = Duration::from_millis(link.wait_ms);
-    Ok(device::run_cdc(port, verb, wait, &mut print_line)?.exit_code())
+    let v = device::run_cdc(port, verb, wait, &mut print_line).or_exit(Exit::Io)?;
+    Ok(v.into())
 }
 
-/// Opens the device of a board verb and runs a seed 003 verb on it.
-fn teensy_verb(link: &SerialArgs, motors: usize, verb: &TeensyVerb) -> Result<u8, String> {
+/// Opens the device of a board verb and runs a Teensy serial link verb on it.
+fn teensy_verb(link: &SerialArgs, motors: usize, verb: &TeensyVerb) -> Run {
+    check_motors(motors)?;
     let port = open_serial(&link.device, link.baud)?;
     let wait = Duration::from_millis(link.wait_ms);
-    Ok(device::run_teensy(port, motors, verb, wait, &mut print_line)?.exit_code())
+    let v = device::run_teensy(port, motors, verb, wait, &mut print_line).or_exit(Exit::Io)?;
+    Ok(v.into())
 }
 
 const NOT_TEENSY: &str =
-    "this verb speaks seed 001 (--kind serial); for a seed 003 arm use move, cal, endeff, config";
+    "this verb speaks the USB CDC four-motor link (--kind serial); for a Teensy serial link arm use move, cal, endeff, config";
 const NOT_PI: &str =
-    "seed 004 (--kind pi-spi) has the verbs ping, monitor and drive (ping and monitor never command the motors)";
+    "the Raspberry Pi SPI link (--kind pi-spi) has the verbs ping, monitor and drive (ping and monitor never command the motors)";
 const NOT_SERIAL: &str =
-    "this verb speaks seed 003 (--kind teensy); for a seed 001 board use enable, estop, drive";
+    "this verb speaks the Teensy serial link (--kind teensy); for a USB CDC four-motor board use enable, estop, drive";
 
 /// Runs one of the board verbs (everything but sim, decode, encode, monitor, ping, info, loop-bench).
-fn board_verb(cmd: Cmd) -> Result<u8, String> {
+fn board_verb(cmd: Cmd) -> Run {
     let on = |s: OnOff| matches!(s, OnOff::On);
     match cmd {
         Cmd::Enable { state, link } => {
@@ -962,11 +1156,12 @@ fn board_verb(cmd: Cmd) -> Result<u8, String> {
             }
             expect_kind(link.kind, SerialKind::Serial, NOT_TEENSY)?;
             if let Some(flag) = pi.first_given() {
-                return Err(format!("{flag} is an option of drive --kind pi-spi; this is a seed 001 drive (--kind serial): give --pwm"));
+                return Err(Failure::usage(format!("{flag} is an option of drive --kind pi-spi; this is a USB CDC four-motor drive (--kind serial): give --pwm")));
             }
-            let pwm = pwm.ok_or("drive --kind serial needs --pwm: the duties of motors 1 to 4, e.g. --pwm 300,-300,0,0")?;
-            let pwm = device::parse_list(&pwm, "--pwm")?;
-            let plan = DrivePlan::new(&pwm, timeout_ms, hz.unwrap_or(50.0), seconds, enable)?;
+            let pwm = pwm.ok_or_else(|| Failure::usage("drive --kind serial needs --pwm: the duties of motors 1 to 4, e.g. --pwm 300,-300,0,0"))?;
+            let pwm = device::parse_list(&pwm, "--pwm").or_exit(Exit::Usage)?;
+            let plan = DrivePlan::new(&pwm, timeout_ms, hz.unwrap_or(50.0), seconds, enable)
+                .or_exit(Exit::Usage)?;
             cdc_verb(&link, &CdcVerb::Drive(plan))
         }
         Cmd::Move {
@@ -981,8 +1176,10 @@ fn board_verb(cmd: Cmd) -> Result<u8, String> {
             motors,
         } => {
             expect_kind(link.kind, SerialKind::Teensy, NOT_SERIAL)?;
-            let angles = device::parse_list(&angles, "--angles")?;
-            let plan = MovePlan::new(&angles, motors, speed, relative, hz, seconds, once, cal)?;
+            check_motors(motors)?;
+            let angles = device::parse_list(&angles, "--angles").or_exit(Exit::Usage)?;
+            let plan = MovePlan::new(&angles, motors, speed, relative, hz, seconds, once, cal)
+                .or_exit(Exit::Usage)?;
             teensy_verb(&link, motors, &TeensyVerb::Move(plan))
         }
         Cmd::Cal { link, motors } => {
@@ -1018,16 +1215,16 @@ fn board_verb(cmd: Cmd) -> Result<u8, String> {
             motors,
         } => {
             let h = SendHex {
-                bytes: cli::parse_hex(&hex)?,
+                bytes: cli::parse_hex(&hex).or_exit(Exit::Usage)?,
                 listen: Duration::from_millis(listen_ms),
             };
             match link.kind.unwrap_or(SerialKind::Serial) {
                 SerialKind::Serial => cdc_verb(&link, &CdcVerb::SendHex(h)),
                 SerialKind::Teensy => teensy_verb(&link, motors, &TeensyVerb::SendHex(h)),
-                SerialKind::PiSpi => Err(NOT_PI.into()),
+                SerialKind::PiSpi => Err(Failure::usage(NOT_PI)),
             }
         }
-        _ => Err("internal: not a board verb".into()),
+        _ => Err(Failure::usage("internal: not a board verb")),
     }
 }
 
@@ -1037,11 +1234,15 @@ fn info(
     speed: u32,
     timeout_ms: u32,
     json: bool,
-) -> Result<(), String> {
+) -> Run {
     let text = if let Some(path) = capture {
-        cli::info::info_capture_file(path, json)?
+        let bytes = std::fs::read(path)
+            .map_err(|e| format!("cannot read {}: {e}", path.display()))
+            .or_exit(Exit::NoInput)?;
+        cli::info::info_capture(&path.display().to_string(), &bytes, json)
+            .or_exit(Exit::DataRefused)?
     } else if let Some(device) = device {
-        let mut spi = SpiTransport::open(device, speed).map_err(|e| e.to_string())?;
+        let mut spi = SpiTransport::open(device, speed).or_exit(Exit::Unavailable)?;
         let mut pacer = Pacer::contract();
         let t0 = Instant::now();
         // A start that differs from run to run; the query moves past the MCU's last accepted seq anyway.
@@ -1052,78 +1253,313 @@ fn info(
         cli::info::info_live(&mut spi, first_seq, exchanges, json, || {
             pacer.wait();
             u32::try_from(t0.elapsed().as_micros() & u128::from(u32::MAX)).unwrap_or(0)
-        })?
+        })
+        .or_exit(Exit::Unavailable)?
     } else {
-        return Err("give --capture FILE or --device /dev/spidevX.Y".into());
+        return Err(Failure::usage(
+            "give --capture FILE or --device /dev/spidevX.Y",
+        ));
     };
     out!("{text}");
-    Ok(())
+    Ok(Exit::Ok)
 }
 
-fn loop_bench(seconds: f64) -> Result<(), String> {
-    // The same work as on the robot (IK, encode, decode, checks), against a device that answers
-    // a valid feedback frame instantly.
-    let mut reply = [0u8; FRAME_LEN];
-    amr::encode_feedback(&MotorFeedback::default(), &mut reply);
-    let mut link = Link::new(
-        NullTransport {
-            reply: reply.to_vec(),
-        },
-        Bridge::new(BridgeConfig::DEFAULT),
-    );
-    link.pacer = Pacer::contract();
-    link.run_for(secs(seconds), |_| {})
-        .map_err(|e| e.to_string())?;
-    let s = &link.pacer.stats;
-    out!("{}", s.summary());
-    out!(
-        "{}",
-        serde_json::json!({"impl": "rust-absolute-deadline", "seconds": seconds, "periods": s.count,
-            "misses": s.misses, "miss_rate": s.miss_rate(), "mean_us": s.mean_us(), "std_us": s.std_us(),
-            "min_us": s.min_us, "max_us": s.max_us, "skipped": s.skipped})
-    );
-    Ok(())
+/// The hex argument of `decode`: as given, or `-` for everything on standard input.
+fn hex_argument(hex: String) -> Result<String, String> {
+    if hex != "-" {
+        return Ok(hex);
+    }
+    let mut text = String::new();
+    std::io::Read::read_to_string(&mut std::io::stdin().lock(), &mut text)
+        .map_err(|e| format!("cannot read the hex from standard input: {e}"))?;
+    if text.trim().is_empty() {
+        return Err("standard input held no hex digits; pipe the bytes in hex, e.g. `echo aa55... | motorlink decode --frame cdc -`".into());
+    }
+    Ok(text)
+}
+
+/// The original loop, as the CLI runs it (`python3 - SECONDS` with this on standard input).
+const SEED_LOOP_PY: &str = include_str!("../scripts/seed_loop.py");
+
+/// One loop's result in `loop-bench`.
+struct Measured {
+    name: &'static str,
+    stats: LoopStats,
+    extra: Value,
+}
+
+/// Runs the original Python loop for `seconds` and returns its periods, µs.
+fn python_loop(python: &str, seconds: f64) -> Result<Vec<f64>, Failure> {
+    use std::io::Write as _;
+    let mut child = std::process::Command::new(python)
+        .arg("-")
+        .arg(seconds.to_string())
+        .stdin(std::process::Stdio::piped())
+        .stdout(std::process::Stdio::piped())
+        .spawn()
+        .map_err(|e| {
+            Failure::new(
+                Exit::Unavailable,
+                format!("cannot run {python}: {e}; give --python PATH, or --rust-only"),
+            )
+        })?;
+    if let Some(mut stdin) = child.stdin.take() {
+        stdin
+            .write_all(SEED_LOOP_PY.as_bytes())
+            .map_err(|e| format!("cannot hand the loop to {python}: {e}"))
+            .or_exit(Exit::Io)?;
+    }
+    let out = child
+        .wait_with_output()
+        .map_err(|e| format!("{python} failed: {e}"))
+        .or_exit(Exit::Io)?;
+    if !out.status.success() {
+        return Err(Failure::new(
+            Exit::Unavailable,
+            format!(
+                "{python} ended with {}; give --python PATH, or --rust-only",
+                out.status
+            ),
+        ));
+    }
+    let v: Value = serde_json::from_slice(&out.stdout)
+        .map_err(|e| format!("the Python loop printed no JSON: {e}"))
+        .or_exit(Exit::Io)?;
+    Ok(v.get("periods_us")
+        .and_then(Value::as_array)
+        .map(|a| a.iter().filter_map(Value::as_f64).collect())
+        .unwrap_or_default())
+}
+
+/// Runs the Rust bridge loop for `seconds` on its own thread with `rt`; returns the real-time
+/// report, the periods (µs) and the pacer's own skipped-deadline count.
+fn rust_loop(
+    seconds: f64,
+    rt: motorlink::rt::RtOptions,
+) -> Result<(motorlink::rt::RtReport, Vec<f64>, u64), Failure> {
+    let bridge = std::thread::Builder::new()
+        .name("bridge".into())
+        .spawn(move || {
+            let report = motorlink::rt::apply(&rt);
+            for w in &report.warnings {
+                eprintln!("{w}");
+            }
+            // The same work as on the robot (IK, encode, decode, checks), against a device that
+            // answers a valid feedback frame at once.
+            let mut reply = [0u8; FRAME_LEN];
+            amr::encode_feedback(&MotorFeedback::default(), &mut reply);
+            let mut link = Link::new(
+                NullTransport {
+                    reply: reply.to_vec(),
+                },
+                Bridge::new(BridgeConfig::DEFAULT),
+            );
+            link.pacer = Pacer::contract();
+            let expected = (seconds * 1000.0).ceil() as usize;
+            link.pacer
+                .keep_periods(expected.saturating_add(expected / 10));
+            link.run_for(secs(seconds), |_| {})
+                .map_err(|e| e.to_string())?;
+            let skipped = link.pacer.stats.skipped;
+            Ok::<_, String>((report, std::mem::take(&mut link.pacer.periods), skipped))
+        })
+        .map_err(|e| format!("cannot start the bridge thread: {e}"))
+        .or_exit(Exit::Io)?;
+    bridge
+        .join()
+        .map_err(|_| Failure::new(Exit::Io, "the bridge thread panicked"))?
+        .or_exit(Exit::Io)
+}
+
+fn loop_bench(seconds: f64, json: bool, python: &str, rust_only: bool, rt: &RtArgs) -> Run {
+    check_seconds(seconds)?;
+    let rt = rt.options()?;
+    let mut loops = Vec::new();
+    if !rust_only {
+        eprintln!("loop-bench: the Python loop for {seconds} s ...");
+        let periods = python_loop(python, seconds)?;
+        let stats = LoopStats::from_periods(&periods)
+            .ok_or_else(|| Failure::new(Exit::Io, "the Python loop measured no period"))?;
+        loops.push(Measured {
+            name: "python-sleep-1ms",
+            stats,
+            extra: serde_json::json!({"paced_by": "time.sleep(0.001) after the work"}),
+        });
+    }
+    eprintln!("loop-bench: the Rust bridge loop for {seconds} s ...");
+    let (report, periods, pacer_skipped) = rust_loop(seconds, rt)?;
+    let stats = LoopStats::from_periods(&periods)
+        .ok_or_else(|| Failure::new(Exit::Io, "the Rust loop measured no period"))?;
+    loops.push(Measured {
+        name: "rust-absolute-deadline",
+        stats,
+        extra: serde_json::json!({"paced_by": "absolute 1 ms deadlines (sleep, then spin the last 150 us)",
+            "pacer_skipped_deadlines": pacer_skipped, "rt": report}),
+    });
+    let goal = match loops.as_slice() {
+        [py, rs] => Some(loopstats::goal(&py.stats, &rs.stats)),
+        _ => None,
+    };
+    let order: Vec<&str> = loops.iter().map(|m| m.name).collect();
+    if json {
+        let list: Vec<Value> = loops
+            .iter()
+            .map(|m| {
+                serde_json::json!({"impl": m.name, "stats": m.stats,
+                    "keeps_window": m.stats.keeps_window(), "details": m.extra})
+            })
+            .collect();
+        out!(
+            "{}",
+            serde_json::json!({"seconds_each": seconds, "mode": "sequential", "order": order,
+                "why_sequential": SEQUENTIAL_WHY,
+                "window_us": {"nominal": loopstats::NOMINAL_US, "tolerance": loopstats::TOLERANCE_US},
+                "loops": list, "goal_factor": loopstats::GOAL_FACTOR, "goal": goal})
+        );
+    } else {
+        out!(
+            "loop-bench: {seconds} s each, one after the other ({}), window {} +- {} us",
+            order.join(", then "),
+            loopstats::NOMINAL_US,
+            loopstats::TOLERANCE_US
+        );
+        out!(
+            "{:<24} {:>8} {:>18} {:>8} {:>8} {:>8} {:>8} {:>8} {:>9}  window",
+            "loop",
+            "periods",
+            "outside",
+            "skipped",
+            "p50 us",
+            "p90 us",
+            "p99 us",
+            "p99.9 us",
+            "max us"
+        );
+        for m in &loops {
+            let s = &m.stats;
+            out!(
+                "{:<24} {:>8} {:>8} ({:>6.3} %) {:>8} {:>8.1} {:>8.1} {:>8.1} {:>8.1} {:>9.1}  {}",
+                m.name,
+                s.periods,
+                s.outside,
+                100.0 * s.outside_share,
+                s.skipped_deadlines,
+                s.p50_us,
+                s.p90_us,
+                s.p99_us,
+                s.p999_us,
+                s.max_us,
+                if s.keeps_window() { "kept" } else { "missed" }
+            );
+        }
+        let verdict = match goal {
+            None => "not judged (--rust-only)".to_string(),
+            Some(Goal::Met { factor: Some(f) }) => format!("met ({f:.1}x fewer by share)"),
+            Some(Goal::Met { factor: None }) => "met (Rust had no period outside)".into(),
+            Some(Goal::NotMet { factor: Some(f) }) => format!("NOT met ({f:.2}x)"),
+            Some(Goal::NotMet { factor: None }) => "NOT met".into(),
+            Some(Goal::NotMeasurable) => "not measurable (neither loop left the window)".into(),
+        };
+        out!(
+            "goal: Rust >= {}x fewer periods outside the window than Python: {verdict}",
+            loopstats::GOAL_FACTOR
+        );
+        out!("why one after the other: {SEQUENTIAL_WHY}");
+    }
+    Ok(match goal {
+        Some(Goal::NotMet { .. }) => Exit::Failed,
+        _ => Exit::Ok,
+    })
+}
+
+/// Why `loop-bench` runs the loops one after the other.
+const SEQUENTIAL_WHY: &str = "at the same time the two loops would share this machine's cores (the Rust loop busy-waits before each deadline, the Python one burns CPU in its callback) and measure how they disturb each other; one after the other, each meets the same machine alone";
+
+/// `decode`: the frame (or capture) as JSON; a capture without a frame is refused data.
+fn decode(frame: FrameKind, hex: String, motors: usize) -> Run {
+    if is_teensy(frame) {
+        check_motors(motors)?;
+    }
+    let hex = hex_argument(hex).or_exit(Exit::Io)?;
+    let d = cli::decode_report(frame, &hex, motors).or_exit(Exit::DataRefused)?;
+    out!("{}", d.json);
+    match d.no_frame {
+        None => Ok(Exit::Ok),
+        Some(why) => Err(Failure::data(why)),
+    }
+}
+
+/// `encode`: the JSON message as a frame in hex.
+fn encode(frame: FrameKind, json: &str, motors: usize) -> Run {
+    if is_teensy(frame) {
+        check_motors(motors)?;
+    }
+    let hex = cli::encode(frame, json, motors).or_exit(Exit::DataRefused)?;
+    out!("{hex}");
+    Ok(Exit::Ok)
+}
+
+/// The frame kinds whose size depends on `--motors`.
+fn is_teensy(frame: FrameKind) -> bool {
+    matches!(frame, FrameKind::TeensyLegacy | FrameKind::TeensyRobust)
+}
+
+/// `sim`: the scenarios' table; exit 1 if an expectation failed.
+fn sim_verb(
+    scenarios: &[String],
+    out: &Path,
+    duration: Option<f64>,
+    no_plots: bool,
+    list: bool,
+) -> Run {
+    if list {
+        for (n, text) in scenario::BUILTIN {
+            let d = Scenario::from_toml(text, n)
+                .map(|s| s.description)
+                .unwrap_or_default();
+            out!("{n:20} {d}");
+        }
+        return Ok(Exit::Ok);
+    }
+    if run_sim(scenarios, out, duration, !no_plots)? {
+        Ok(Exit::Ok)
+    } else {
+        eprintln!("some scenario expectations failed (see FAIL lines above)");
+        Ok(Exit::Failed)
+    }
+}
+
+/// Parses the command line; a usage error exits 64 (clap's own would be 2), help and version 0.
+fn parse() -> Result<Cli, ExitCode> {
+    Cli::try_parse().map_err(|e| {
+        let _ = e.print();
+        if e.use_stderr() {
+            ExitCode::from(Exit::Usage.code())
+        } else {
+            ExitCode::SUCCESS
+        }
+    })
 }
 
 fn main() -> ExitCode {
-    let cli = Cli::parse();
-    let r: Result<u8, String> = match cli.cmd {
+    let cli = match parse() {
+        Ok(cli) => cli,
+        Err(code) => return code,
+    };
+    let r: Run = match cli.cmd {
         Cmd::Sim {
             scenarios,
             out,
             duration,
             no_plots,
             list,
-        } => {
-            if list {
-                for (n, text) in scenario::BUILTIN {
-                    let d = Scenario::from_toml(text, n)
-                        .map(|s| s.description)
-                        .unwrap_or_default();
-                    out!("{n:20} {d}");
-                }
-                Ok(0)
-            } else {
-                run_sim(&scenarios, &out, duration, !no_plots).map(|ok| {
-                    if !ok {
-                        eprintln!("some scenario expectations failed (see FAIL lines above)");
-                    }
-                    u8::from(!ok)
-                })
-            }
-        }
-        Cmd::Decode { frame, hex, motors } => cli::decode(frame, &hex, motors).map(|s| {
-            out!("{s}");
-            0
-        }),
+        } => sim_verb(&scenarios, &out, duration, no_plots, list),
+        Cmd::Decode { frame, hex, motors } => decode(frame, hex, motors),
         Cmd::Encode {
             frame,
             json,
             motors,
-        } => cli::encode(frame, &json, motors).map(|s| {
-            out!("{s}");
-            0
-        }),
+        } => encode(frame, &json, motors),
         Cmd::Monitor {
             device,
             kind,
@@ -1132,6 +1568,7 @@ fn main() -> ExitCode {
             hz,
             count,
             motors,
+            rt,
         } => monitor(&MonitorArgs {
             device: &device,
             kind,
@@ -1140,6 +1577,7 @@ fn main() -> ExitCode {
             hz,
             count,
             motors,
+            rt: &rt,
         }),
         Cmd::Ping {
             device,
@@ -1168,9 +1606,14 @@ fn main() -> ExitCode {
             speed,
             timeout_ms,
             json,
-        )
-        .map(|()| 0),
-        Cmd::LoopBench { seconds } => loop_bench(seconds).map(|()| 0),
+        ),
+        Cmd::LoopBench {
+            seconds,
+            json,
+            python,
+            rust_only,
+            rt,
+        } => loop_bench(seconds, json, &python, rust_only, &rt),
         Cmd::Record {
             device,
             out,
@@ -1183,10 +1626,10 @@ fn main() -> ExitCode {
         verb => board_verb(verb),
     };
     match r {
-        Ok(code) => ExitCode::from(code),
-        Err(e) => {
-            eprintln!("error: {e}");
-            ExitCode::from(device::EXIT_ERROR)
+        Ok(exit) => ExitCode::from(exit.code()),
+        Err(f) => {
+            eprintln!("error: {}", f.message);
+            ExitCode::from(f.exit.code())
         }
     }
 }

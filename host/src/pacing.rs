@@ -140,6 +140,9 @@ pub struct Pacer {
     last_wake: Option<Instant>,
     /// Measured periods between consecutive wake-ups.
     pub stats: PeriodStats,
+    /// Every measured period, µs, in order, once [`Pacer::keep_periods`] asked for them.
+    pub periods: Vec<f64>,
+    keep: bool,
 }
 
 impl Pacer {
@@ -154,7 +157,16 @@ impl Pacer {
                 .unwrap_or_else(Instant::now),
             last_wake: None,
             stats: PeriodStats::new(CONTRACT_PERIOD, CONTRACT_TOLERANCE),
+            periods: Vec::new(),
+            keep: false,
         }
+    }
+
+    /// Keeps every period from now on in [`Pacer::periods`], with room for `capacity` of them
+    /// reserved now (so a run of known length does not allocate in the loop).
+    pub fn keep_periods(&mut self, capacity: usize) {
+        self.keep = true;
+        self.periods.reserve(capacity);
     }
 
     /// The seed's contract: 1 ms, with a 150 µs spin.
@@ -184,8 +196,11 @@ impl Pacer {
         }
         let woke = Instant::now();
         if let Some(prev) = self.last_wake {
-            self.stats
-                .record_us(woke.duration_since(prev).as_secs_f64() * 1e6);
+            let period_us = woke.duration_since(prev).as_secs_f64() * 1e6;
+            self.stats.record_us(period_us);
+            if self.keep {
+                self.periods.push(period_us);
+            }
         }
         self.last_wake = Some(woke);
         self.advance();
@@ -242,5 +257,21 @@ mod tests {
         let cycles = 21 + u32::try_from(p.stats.skipped).unwrap();
         assert_eq!(p.next_deadline(), first + period * cycles);
         assert_eq!(p.stats.count, 20);
+    }
+
+    #[test]
+    fn kept_periods_are_the_recorded_ones() {
+        let mut p = Pacer::new(Duration::from_millis(1), Duration::from_micros(150));
+        p.wait();
+        p.wait();
+        assert!(p.periods.is_empty(), "nothing kept before it is asked for");
+        p.keep_periods(8);
+        for _ in 0..5 {
+            p.wait();
+        }
+        assert_eq!(p.periods.len(), 5);
+        assert_eq!(p.stats.count, 6);
+        let max = p.periods.iter().copied().fold(0.0, f64::max);
+        assert_eq!(max.max(p.stats.max_us), p.stats.max_us);
     }
 }

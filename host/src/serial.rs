@@ -55,6 +55,14 @@ impl<S: ByteStream> CdcLink<S> {
         self.decoder.stats()
     }
 
+    /// Discards what was received and not yet read, and the decoder's partial frame (counted as
+    /// dropped): the next message is one that arrives after this call. Returns the bytes discarded.
+    pub fn discard_input(&mut self) -> Result<usize, LinkError> {
+        let held = self.decoder.buffered();
+        self.decoder.reset();
+        Ok(self.stream.discard_input()?.saturating_add(held))
+    }
+
     /// Frames and sends `msg`.
     pub fn send(&mut self, msg: &cdc::Message) -> Result<(), LinkError> {
         let mut out = [0u8; cdc::MAX_FRAME_LEN];
@@ -157,6 +165,13 @@ impl<S: ByteStream, const N: usize> TeensyLink<S, N> {
     /// The receive decoder's counters.
     pub fn stats(&self) -> teensy::RobustStats {
         self.decoder.stats()
+    }
+
+    /// Discards what was received and not yet read: the next command decoded starts after this
+    /// call (a partial frame held by the decoder fails its CRC and is counted as refused). Returns
+    /// the bytes discarded.
+    pub fn discard_input(&mut self) -> Result<usize, LinkError> {
+        self.stream.discard_input()
     }
 
     /// Sends `msg` as a robust frame.

@@ -154,6 +154,9 @@ pub trait ByteStream {
     fn set_read_timeout(&mut self, _timeout: Duration) -> Result<(), LinkError> {
         Ok(())
     }
+    /// Discards every byte received and not yet read (stale replies, periodic frames), so the
+    /// next read returns only what arrives after this call. Returns how many were discarded.
+    fn discard_input(&mut self) -> Result<usize, LinkError>;
 }
 
 impl ByteStream for SerialTransport {
@@ -179,6 +182,13 @@ impl ByteStream for SerialTransport {
         self.port
             .set_timeout(timeout)
             .map_err(|e| LinkError::Configure(self.path.clone(), e.to_string()))
+    }
+    fn discard_input(&mut self) -> Result<usize, LinkError> {
+        let waiting = self.port.bytes_to_read().unwrap_or(0);
+        self.port
+            .clear(serialport::ClearBuffer::Input)
+            .map_err(|e| LinkError::Io(self.path.clone(), std::io::Error::other(e.to_string())))?;
+        Ok(usize::try_from(waiting).unwrap_or(usize::MAX))
     }
 }
 
@@ -226,6 +236,11 @@ impl ByteStream for ScriptedStream {
 
     fn name(&self) -> &str {
         "scripted"
+    }
+    fn discard_input(&mut self) -> Result<usize, LinkError> {
+        let n = self.pending.len();
+        self.pending.clear();
+        Ok(n)
     }
 }
 

@@ -166,7 +166,7 @@ fn bad_arguments_are_refused_before_anything_runs() {
         ),
     ] {
         let (code, _, stderr) = record(&args);
-        assert_eq!(code, 2, "{args:?}: {stderr}");
+        assert_eq!(code, 64, "{args:?}: a usage error: {stderr}");
         assert!(stderr.contains(says), "{args:?}: {stderr}");
     }
     assert!(!bag.exists());

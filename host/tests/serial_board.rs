@@ -602,14 +602,14 @@ fn a_silent_device_is_no_reply_and_bad_drive_arguments_send_nothing() {
         &["move", path, "--angles", "1,2,3", "--speed", "10"],
     ] {
         let (code, lines, err) = motorlink(bad);
-        assert_eq!(code, 2, "{bad:?}");
+        assert_eq!(code, 64, "{bad:?}");
         assert!(lines.is_empty());
         assert!(err.contains("error:"), "{err}");
         assert!(drain().is_empty(), "nothing sent for {bad:?}");
     }
 
     let (code, lines, _) = motorlink(&["enable", "on", path, "--wait-ms", "100"]);
-    assert_eq!(code, 3);
+    assert_eq!(code, 69);
     assert_eq!(last(&lines)["verdict"], "no_reply");
     assert_eq!(
         drain(),
@@ -618,7 +618,7 @@ fn a_silent_device_is_no_reply_and_bad_drive_arguments_send_nothing() {
     );
 
     let (code, lines, _) = motorlink(&["drive", path, "--pwm", "10,0,0,0", "--seconds", "0.25"]);
-    assert_eq!(code, 3, "a drive that hears nothing");
+    assert_eq!(code, 69, "a drive that hears nothing");
     assert_eq!(last(&lines)["verdict"], "no_reply");
     let sent = drain();
     // SET_MOTOR_PWM: 4 header + 10 payload + 2 CRC bytes; 0.25 s at 50 Hz.
@@ -635,7 +635,7 @@ fn a_silent_device_is_no_reply_and_bad_drive_arguments_send_nothing() {
         "--wait-ms",
         "100",
     ]);
-    assert_eq!(code, 3);
+    assert_eq!(code, 69);
     assert_eq!(last(&lines)["verdict"], "no_reply");
 }
 

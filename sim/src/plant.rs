@@ -29,7 +29,7 @@ use serde::{Deserialize, Serialize};
 
 /// Physical parameters. Defaults: a 24 V, 40 kg base with 20:1 gearmotors.
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
-#[serde(default)]
+#[serde(default, deny_unknown_fields)]
 pub struct PlantParams {
     /// Bus voltage, V.
     pub v_bus: f64,

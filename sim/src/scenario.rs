@@ -32,6 +32,7 @@ use serde::{Deserialize, Serialize};
 
 /// One piece of Nav2's velocity command profile.
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
 pub struct CmdVelSegment {
     /// Start, s.
     pub from_s: f64,
@@ -45,7 +46,7 @@ pub struct CmdVelSegment {
 
 /// Something the operator or the host software asks for at a given time.
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
-#[serde(tag = "kind", rename_all = "snake_case")]
+#[serde(tag = "kind", rename_all = "snake_case", deny_unknown_fields)]
 pub enum Request {
     /// Arm the drive (sends enable 0 then 1).
     Arm {
@@ -95,9 +96,9 @@ impl Wheel {
 
 /// An injected fault.
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
-#[serde(tag = "kind", rename_all = "snake_case")]
+#[serde(tag = "kind", rename_all = "snake_case", deny_unknown_fields)]
 pub enum Fault {
-    /// Incident-A: each command frame in the window is corrupted with probability `rate`
+    /// EMI on the link: each command frame in the window is corrupted with probability `rate`
     /// (random bit flips or a burst of random bytes, as EMI would).
     Corruption {
         /// Probability per frame.
@@ -112,7 +113,7 @@ pub enum Fault {
         #[serde(default)]
         feedback: bool,
     },
-    /// Incident-C: the host process pauses (garbage collection): no SPI transfers, no cmd_vel.
+    /// A host stall: the host process pauses (garbage collection): no SPI transfers, no cmd_vel.
     GcPause {
         /// Start, s.
         at_s: f64,
@@ -256,7 +257,7 @@ impl Profile {
 
 /// The serial line of the seed 001 and seed 003 profiles (both directions).
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
-#[serde(default)]
+#[serde(default, deny_unknown_fields)]
 pub struct SerialSettings {
     /// Line rate, bit/s (8N1: ten bits per byte).
     pub baud: f64,
@@ -278,6 +279,7 @@ impl Default for SerialSettings {
 
 /// A piece of the seed 001 host's drive: the `SET_MOTOR_PWM` values it streams.
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
 pub struct PwmSegment {
     /// Start, s.
     pub from_s: f64,
@@ -305,6 +307,7 @@ pub enum CdcMessage {
 
 /// A low-rate message the seed 001 host sends at a given time, and the ACK it must get.
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
 pub struct CdcCommand {
     /// When, s.
     pub at_s: f64,
@@ -317,7 +320,7 @@ pub struct CdcCommand {
 
 /// The seed 001 host and board.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
-#[serde(default)]
+#[serde(default, deny_unknown_fields)]
 pub struct CdcSettings {
     /// `SET_MOTOR_PWM` rate, Hz (streamed for the whole run, zeros outside the drive segments).
     pub frame_hz: f64,
@@ -356,6 +359,7 @@ impl CdcSettings {
 
 /// A piece of the seed 003 host's motion: the `MTRS` it streams.
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
 pub struct JointMove {
     /// Start, s.
     pub from_s: f64,
@@ -390,6 +394,7 @@ pub enum TeensyCmd {
 
 /// A one-off seed 003 command and the `cmd_success` its echo must carry.
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
 pub struct TeensyCommand {
     /// When, s.
     pub at_s: f64,
@@ -411,7 +416,7 @@ pub struct TeensyCommand {
 
 /// The seed 003 host and board.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
-#[serde(default)]
+#[serde(default, deny_unknown_fields)]
 pub struct TeensySettings {
     /// `MTRS` rate while a move is in force, Hz.
     pub frame_hz: f64,
@@ -481,6 +486,7 @@ pub enum PiServoMode {
 
 /// A time window of the seed 004 host's motor command, as the wire carries it.
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
 pub struct PiSegment {
     /// Start, s.
     pub from_s: f64,
@@ -498,6 +504,7 @@ pub struct PiSegment {
 
 /// A servo command of the seed 004 host, in force from `at_s` until the next.
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
 pub struct PiServoCommand {
     /// From, s.
     pub at_s: f64,
@@ -510,6 +517,7 @@ pub struct PiServoCommand {
 
 /// Shutdown bits the seed 004 host sets (`systemShutdown`).
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
 pub struct PiShutdown {
     /// From, s: the first transfer at or after it carries the bits.
     pub at_s: f64,
@@ -526,6 +534,7 @@ pub struct PiShutdown {
 
 /// A `KinematicsConfig` as the host sends it.
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
 pub struct PiKinematics {
     /// Rows vx, vy, wz; columns wheels 1–4: body twist = inverse × wheel speeds (rad/s).
     pub inverse: [[f32; 4]; 3],
@@ -535,7 +544,7 @@ pub struct PiKinematics {
 
 /// The seed 004 host and board.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
-#[serde(default)]
+#[serde(default, deny_unknown_fields)]
 pub struct PiSpiSettings {
     /// Transfers per second (the seed's 10 ms: 100).
     pub frame_hz: f64,
@@ -604,7 +613,7 @@ impl PiSpiSettings {
 
 /// Limits the run must respect; checked by [`crate::runner::Summary::check`].
 #[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
-#[serde(default)]
+#[serde(default, deny_unknown_fields)]
 pub struct Expect {
     /// BRAKE must latch between these times after the last valid frame before it, ms.
     pub brake_after_last_frame_ms: Option<[f64; 2]>,
@@ -646,7 +655,7 @@ pub struct Expect {
 
 /// Host-side settings of a scenario.
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
-#[serde(default)]
+#[serde(default, deny_unknown_fields)]
 pub struct HostSettings {
     /// Nav2 cmd_vel rate, Hz.
     pub nav2_rate_hz: f64,
@@ -674,6 +683,7 @@ impl Default for HostSettings {
 
 /// A whole scenario.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
 pub struct Scenario {
     /// Short name (file stem), used for output files.
     pub name: String,
@@ -1066,6 +1076,101 @@ pub const BUILTIN: [(&str, &str); 17] = [
     ),
 ];
 
+/// Resets `field` to its default (no expectation) and records `name` if it held one.
+fn unjudge<T: Default + PartialEq>(field: &mut T, name: &'static str, out: &mut Vec<&'static str>) {
+    if *field != T::default() {
+        *field = T::default();
+        out.push(name);
+    }
+}
+
+impl Scenario {
+    /// This scenario run for `run_s` seconds instead of its own `duration_s` (`motorlink sim
+    /// --duration`): the scenario to run, and the names of the expectations taken out of its
+    /// `[expect]` because they depend on its own duration. They are reported as not judged, never
+    /// as passed or failed. The simulation is deterministic (same seed, same events), so:
+    ///
+    /// ```text
+    ///  own run   |--------------------------------| duration_s
+    ///  shorter   |-------------| run_s              a prefix of the own run
+    ///  longer    |--------------------------------|------| run_s   the own run, then more
+    /// ```
+    ///
+    /// - Shorter: only bounds that a prefix cannot break unless the whole run breaks them too are
+    ///   judged: `never_brake`, `max_corrupted_applied`, `max_servo_violations`. The others need
+    ///   events at or after the cut (a fault's BRAKE, a stop, a move's end, a report) or the end
+    ///   state.
+    /// - Longer: every event of the scenario happens; what is measured at the end is not judged:
+    ///   `moving_at_end`, `final_mode`, `max_clock_error_us` (over the last second), and
+    ///   `max_odometry_error_pct` when `pi_spi.odometry_at_s` is not set (then measured at the end).
+    /// - The same duration: everything is judged.
+    pub fn with_duration(&self, run_s: f64) -> (Self, Vec<&'static str>) {
+        let mut sc = self.clone();
+        sc.duration_s = run_s;
+        let mut not = Vec::new();
+        let e = &mut sc.expect;
+        if run_s < self.duration_s {
+            unjudge(
+                &mut e.brake_after_last_frame_ms,
+                "brake_after_last_frame_ms",
+                &mut not,
+            );
+            unjudge(&mut e.max_stop_distance_m, "max_stop_distance_m", &mut not);
+            unjudge(&mut e.moving_at_end, "moving_at_end", &mut not);
+            unjudge(&mut e.host_reports, "host_reports", &mut not);
+            unjudge(&mut e.max_clock_error_us, "max_clock_error_us", &mut not);
+            unjudge(&mut e.final_mode, "final_mode", &mut not);
+            unjudge(
+                &mut e.brake_after_last_frame_ticks,
+                "brake_after_last_frame_ticks",
+                &mut not,
+            );
+            unjudge(
+                &mut e.max_speed_at_onset_mps,
+                "max_speed_at_onset_mps",
+                &mut not,
+            );
+            unjudge(
+                &mut e.estop_brakes_at_once,
+                "estop_brakes_at_once",
+                &mut not,
+            );
+            unjudge(
+                &mut e.max_joint_error_steps,
+                "max_joint_error_steps",
+                &mut not,
+            );
+            unjudge(
+                &mut e.max_steps_after_brake,
+                "max_steps_after_brake",
+                &mut not,
+            );
+            unjudge(
+                &mut e.max_odometry_error_pct,
+                "max_odometry_error_pct",
+                &mut not,
+            );
+            unjudge(
+                &mut e.shutdown_brakes_in_its_transfer,
+                "shutdown_brakes_in_its_transfer",
+                &mut not,
+            );
+        } else if run_s > self.duration_s {
+            unjudge(&mut e.moving_at_end, "moving_at_end", &mut not);
+            unjudge(&mut e.final_mode, "final_mode", &mut not);
+            unjudge(&mut e.max_clock_error_us, "max_clock_error_us", &mut not);
+            if self.pi_spi.odometry_at_s.is_none() {
+                unjudge(
+                    &mut e.max_odometry_error_pct,
+                    "max_odometry_error_pct",
+                    &mut not,
+                );
+            }
+        }
+        (sc, not)
+    }
+}
+
 /// Parses every built-in scenario.
 pub fn builtin() -> Result<Vec<Scenario>, ScenarioError> {
     BUILTIN
@@ -1186,6 +1291,93 @@ mod tests {
                 matches!(&r, Err(ScenarioError::Invalid(_, m)) if m.contains(field)),
                 "{plant}: {r:?}"
             );
+        }
+    }
+
+    fn nominal() -> Scenario {
+        builtin()
+            .unwrap()
+            .into_iter()
+            .find(|s| s.name == "nominal")
+            .unwrap()
+    }
+
+    #[test]
+    fn a_shorter_run_judges_only_what_a_prefix_cannot_break_falsely() {
+        let own = nominal();
+        // nominal expects: never_brake, max_corrupted_applied 0, final_mode NORMAL, moving_at_end false.
+        let (sc, not) = own.with_duration(own.duration_s / 2.0);
+        assert_eq!(not, vec!["moving_at_end", "final_mode"]);
+        assert!(sc.expect.never_brake);
+        assert_eq!(sc.expect.max_corrupted_applied, Some(0));
+        assert_eq!(sc.expect.final_mode, None);
+        assert_eq!(sc.expect.moving_at_end, None);
+    }
+
+    #[test]
+    fn a_longer_run_judges_all_but_the_end_state() {
+        let own = nominal();
+        let (sc, not) = own.with_duration(own.duration_s * 2.0);
+        assert_eq!(not, vec!["moving_at_end", "final_mode"]);
+        assert!(sc.expect.never_brake);
+        let mut with_reports = own.clone();
+        with_reports.expect.host_reports = vec!["mcu_frozen".into()];
+        let (sc, not) = with_reports.with_duration(own.duration_s * 2.0);
+        assert_eq!(sc.expect.host_reports, vec!["mcu_frozen".to_string()]);
+        assert!(!not.contains(&"host_reports"));
+        let (sc, not) = with_reports.with_duration(own.duration_s / 2.0);
+        assert!(sc.expect.host_reports.is_empty());
+        assert!(not.contains(&"host_reports"));
+    }
+
+    #[test]
+    fn the_own_duration_judges_everything() {
+        let own = nominal();
+        let (sc, not) = own.with_duration(own.duration_s);
+        assert!(not.is_empty());
+        assert_eq!(sc, own);
+    }
+}
+
+#[cfg(test)]
+#[allow(clippy::unwrap_used, clippy::panic)]
+mod unknown_keys {
+    use super::*;
+
+    /// A misspelt key anywhere in the schema is refused with its name, never dropped.
+    #[test]
+    fn a_misspelt_key_in_any_table_is_refused_with_its_name() {
+        let base = "name = \"t\"\nduration_s = 1.0\n";
+        for (extra, typo) in [
+            ("descripton = \"x\"", "descripton"),
+            ("[expect]\nnever_brak = true", "never_brak"),
+            ("[host]\nnav2_rate = 20.0", "nav2_rate"),
+            ("[plant]\nwheel_radius = 0.1", "wheel_radius"),
+            ("[serial]\nbaudrate = 9600.0", "baudrate"),
+            ("[cdc]\nframe_rate = 50.0", "frame_rate"),
+            ("[teensy]\nhz = 50.0", "hz"),
+            ("[pi_spi]\nframehz = 100.0", "framehz"),
+            (
+                "[[cmd_vel]]\nfrom_s = 0.0\nto_s = 1.0\nv = 1.0\nw = 0.0\nvv = 2.0",
+                "vv",
+            ),
+            (
+                "[[faults]]\nkind = \"gc_pause\"\nat_s = 0.5\nduration_s = 0.05\nlength_s = 1.0",
+                "length_s",
+            ),
+            (
+                "[[requests]]\nkind = \"arm\"\nat_s = 0.01\nwhen = 1.0",
+                "when",
+            ),
+            (
+                "[[cdc.commands]]\nat_s = 0.1\nmessage = \"ping\"\nak = 0",
+                "ak",
+            ),
+        ] {
+            match Scenario::from_toml(&format!("{base}{extra}\n"), "test") {
+                Err(ScenarioError::Parse(_, e)) => assert!(e.contains(typo), "{typo}: {e}"),
+                other => panic!("{typo} was accepted: {other:?}"),
+            }
         }
     }
 }

@@ -15,7 +15,7 @@
 //! ```
 //!
 //! The verdict is the exit status ([`Verdict::exit_code`]); an argument, open or I/O error is the
-//! `Err` of the verb and exits with [`EXIT_ERROR`].
+//! `Err` of the verb, and the CLI gives it its own status ([`crate::cli::exit::Exit`]).
 //!
 //! Leaving BRAKE (seed 001 `drive --enable`, seed 003 `move --cal`): the board leaves BRAKE at a
 //! tick after a re-arm and a fresh enabled frame. Its `MOTOR_ENABLE 1` / `CAL` carries a coasting
@@ -51,18 +51,10 @@ pub enum Verdict {
     NoReply,
 }
 
-/// Exit status of an error outside the exchange: a bad argument (refused before anything is sent),
-/// a device that cannot be opened, an I/O error. Also clap's status for a usage error.
-pub const EXIT_ERROR: u8 = 2;
-
 impl Verdict {
-    /// The process exit status: 0 done, 1 refused, 3 no reply ([`EXIT_ERROR`] is 2).
-    pub const fn exit_code(self) -> u8 {
-        match self {
-            Self::Done => 0,
-            Self::Refused => 1,
-            Self::NoReply => 3,
-        }
+    /// The process exit status: 0 done, 1 refused, 69 no reply (see [`crate::cli::exit::Exit`]).
+    pub fn exit_code(self) -> u8 {
+        crate::cli::exit::Exit::from(self).code()
     }
 
     /// The name printed in `verdict`.
@@ -366,6 +358,8 @@ trait BoardLink {
 
     /// The byte stream, for raw writes and its read timeout.
     fn stream(&mut self) -> &mut Self::Stream;
+    /// Discards everything received and not yet read; returns the bytes discarded.
+    fn discard_input(&mut self) -> Result<usize, LinkError>;
     /// Writes one message.
     fn send(&mut self, m: &Self::Msg) -> Result<(), LinkError>;
     /// One read: the messages it completed.
@@ -472,6 +466,15 @@ fn send_hex<L: BoardLink>(s: &mut Session<'_, L>, h: &SendHex) -> Result<Verdict
 }
 
 /// `count` round trips of `probe`, each waiting up to `wait` for a message satisfying `is_reply`.
+///
+/// Before each probe the input is discarded (a periodic frame, or the late reply of an earlier
+/// probe, would otherwise be taken for this one's reply), so the reply is the first matching
+/// message that arrives after the probe was written:
+///
+/// ```text
+///  host   discard ── PING ─────────────── discard ── PING ───── ...
+///  board  STATUS (periodic: dropped)  ◀── STATUS (the reply to this PING)
+/// ```
 fn ping<L: BoardLink>(
     s: &mut Session<'_, L>,
     probe: L::Msg,
@@ -480,7 +483,10 @@ fn ping<L: BoardLink>(
     wait: Duration,
 ) -> Result<Verdict, String> {
     let mut rtts = Vec::new();
+    let mut discarded = 0usize;
     for i in 0..count {
+        let stale = s.link.discard_input().map_err(err)?;
+        discarded = discarded.saturating_add(stale);
         let t = Instant::now();
         s.send(&probe)?;
         match s.wait_for(after(t, wait), &is_reply)? {
@@ -502,7 +508,7 @@ fn ping<L: BoardLink>(
     let decoder = s.link.decoder();
     s.out.put(
         json!({"verdict": verdict.as_str(), "sent": count, "replies": rtts.len(),
-        "round_trip_us": rtt_json(&rtts), "decoder": decoder}),
+        "round_trip_us": rtt_json(&rtts), "discarded_bytes": discarded, "decoder": decoder}),
     );
     Ok(verdict)
 }
@@ -512,7 +518,7 @@ fn rtt_json(rtts: &[Duration]) -> Value {
         return Value::Null;
     };
     let sum: f64 = rtts.iter().map(Duration::as_secs_f64).sum();
-    json!({"min": us(*min), "max": us(*max), "mean": (sum / rtts.len() as f64 * 1e6).round()})
+    json!({"min": us(*min), "avg": (sum / rtts.len() as f64 * 1e6).round(), "max": us(*max)})
 }
 
 /// Sends `msg` and waits up to `wait` for its reply, a message satisfying `is_reply`.
@@ -698,6 +704,10 @@ impl<S: ByteStream> BoardLink for CdcLink<S> {
         &mut self.stream
     }
 
+    fn discard_input(&mut self) -> Result<usize, LinkError> {
+        CdcLink::discard_input(self)
+    }
+
     fn send(&mut self, m: &cdc::Message) -> Result<(), LinkError> {
         CdcLink::send(self, m)
     }
@@ -847,6 +857,10 @@ impl<S: ByteStream, const N: usize> BoardLink for TeensyLink<S, N> {
 
     fn stream(&mut self) -> &mut S {
         &mut self.stream
+    }
+
+    fn discard_input(&mut self) -> Result<usize, LinkError> {
+        TeensyLink::discard_input(self)
     }
 
     fn send(&mut self, m: &teensy::CmdMsg<N>) -> Result<(), LinkError> {

@@ -131,10 +131,10 @@ impl Identity {
 /// The link each board profile speaks.
 fn board_link(b: BoardProfile) -> &'static str {
     match b {
-        BoardProfile::AmrSpi => "seed 000, Jetson SPI",
-        BoardProfile::Cdc => "seed 001, USB CDC / UART",
-        BoardProfile::Teensy => "seed 003, Teensy serial",
-        BoardProfile::PiSpi => "seed 004, Raspberry Pi SPI",
+        BoardProfile::AmrSpi => "AMR SPI link, Jetson",
+        BoardProfile::Cdc => "USB CDC four-motor link",
+        BoardProfile::Teensy => "Teensy serial link",
+        BoardProfile::PiSpi => "Raspberry Pi SPI link",
     }
 }
 

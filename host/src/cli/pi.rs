@@ -48,7 +48,7 @@
 //!  {"t_ms":..,"verdict":"done"|"refused"|"no_reply",..}                always the last line
 //! ```
 //!
-//! * `no_reply` (exit 3): `update_time` never advanced between two decoded replies: none decoded
+//! * `no_reply` (exit 69): `update_time` never advanced between two decoded replies: none decoded
 //!   (all 0x00 or 0xFF bytes: no board), only one, or all with the same `update_time` (a stale
 //!   board: its SPI callback does not run; `"stale":true`).
 //! * `refused` (exit 1, `drive` only): commands were sent for at least [`REFUSED_AFTER`], some motor
@@ -57,8 +57,8 @@
 //!   of those motors' `motor.position` ever differed from its value in the first reply.
 //! * `done` (exit 0): otherwise.
 //!
-//! An argument error refuses the run before the device is opened, an open or transfer error ends
-//! it; both exit [`super::device::EXIT_ERROR`] (2). A run stopped by a signal ends normally, with
+//! An argument error refuses the run before the device is opened (exit 64), an open error (69) or a
+//! transfer error (74) ends it (see [`super::exit::Exit`]). A run stopped by a signal ends normally, with
 //! `"interrupted":true`.
 
 use std::path::Path;
@@ -101,7 +101,7 @@ pub const IGNORED: [u8; TRANSFER_LEN] = [0; TRANSFER_LEN];
 
 /// The seed 004 options of `drive` (`--kind pi-spi`), as given on the command line.
 #[derive(Clone, Debug, Default, clap::Args)]
-#[command(next_help_heading = "Seed 004 Raspberry Pi SPI (drive --kind pi-spi)")]
+#[command(next_help_heading = "Raspberry Pi SPI link (drive --kind pi-spi)")]
 pub struct PiDriveArgs {
     /// Motor modes, one for all four or four (motors 0-3): off, passive_brake (or brake), pwm, mav,
     /// mtp. Default off.
@@ -482,9 +482,9 @@ fn transfer<D: Transport>(
 }
 
 /// A reply of 0x00 bytes only.
-const HINT_ZERO: &str = "every byte 0x00: no board is driving MISO (absent, unpowered, or its SPI2 DMA not running); check the wiring, the power, and that the seed 004 firmware runs";
+const HINT_ZERO: &str = "every byte 0x00: no board is driving MISO (absent, unpowered, or its SPI2 DMA not running); check the wiring, the power, and that the Raspberry Pi SPI link's firmware runs";
 /// A reply of 0xFF bytes only.
-const HINT_FF: &str = "every byte 0xFF: MISO is floating high, no board is answering; check the wiring, the chip select (PB12) and that the seed 004 firmware runs";
+const HINT_FF: &str = "every byte 0xFF: MISO is floating high, no board is answering; check the wiring, the chip select (PB12) and that the Raspberry Pi SPI link's firmware runs";
 /// Any other reply that does not decode.
 const HINT_VERSION: &str = "transferVersion is not 15: the firmware speaks another pi_buffer.h version, or the transfers are misaligned (reset the board)";
 

@@ -435,7 +435,7 @@ fn wrong_lengths_name_the_expected_length() {
     assert!(err(FrameKind::TeensyRobust, "0101").contains("no 0x00 terminator"));
     let e = err(FrameKind::Cdc, "aa5510");
     assert!(
-        e.contains("Framing") && e.contains("code 2") && e.contains("no seed 001 frame"),
+        e.contains("Framing") && e.contains("code 2") && e.contains("no USB CDC frame"),
         "{e}"
     );
 }
@@ -863,7 +863,7 @@ mod info_cmd {
         for needle in [
             "McuInfo at frame 2",
             "firmware     1.4.2 (git 8624b25f, built from a tree with uncommitted changes)",
-            "board        AmrSpi (seed 000, Jetson SPI)",
+            "board        AmrSpi (AMR SPI link, Jetson)",
             "built        2026-11-30",
             "reset cause  IndependentWatchdog (code 3)",
             "resets       3 since power-on",

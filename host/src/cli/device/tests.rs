@@ -44,8 +44,7 @@ const WAIT: Duration = Duration::from_millis(300);
 fn exit_codes() {
     assert_eq!(Verdict::Done.exit_code(), 0);
     assert_eq!(Verdict::Refused.exit_code(), 1);
-    assert_eq!(EXIT_ERROR, 2);
-    assert_eq!(Verdict::NoReply.exit_code(), 3);
+    assert_eq!(Verdict::NoReply.exit_code(), 69);
     assert_eq!(Verdict::NoReply.as_str(), "no_reply");
 }
 
@@ -282,4 +281,87 @@ fn teensy_commands_take_their_echo_and_a_motor_count_outside_the_range_is_an_err
     )
     .unwrap_err();
     assert!(e.contains("--motors 17"), "{e}");
+}
+
+fn status(t_ms: u32) -> Vec<u8> {
+    frame(&cdc::Message::Status(cdc::Status {
+        t_ms,
+        ..cdc::Status::default()
+    }))
+}
+
+#[test]
+fn ping_does_not_take_a_status_that_was_already_waiting_for_the_reply() {
+    // A STATUS sits in the input before the first PING (a periodic one, or a late reply); the
+    // board does not answer the first PING and answers the second.
+    let mut stream = ScriptedStream::new(vec![Vec::new(), status(200)], 3);
+    stream.pending.extend(status(100));
+    let (v, lines) = collect(|sink| {
+        run_cdc(
+            stream,
+            &CdcVerb::Ping { count: 2 },
+            Duration::from_millis(30),
+            sink,
+        )
+    });
+    assert_eq!(v, Verdict::Done);
+    let pings: Vec<&Value> = lines.iter().filter(|l| l.get("ping").is_some()).collect();
+    assert_eq!(pings.len(), 2, "{lines:?}");
+    assert!(pings[0].get("no_reply_ms").is_some(), "{:?}", pings[0]);
+    assert_eq!(pings[1]["reply"]["t_ms"], 200, "{:?}", pings[1]);
+    let last = lines.last().unwrap();
+    assert_eq!(last["replies"], 1);
+}
+
+#[test]
+fn ping_with_only_stale_input_is_no_reply() {
+    let mut stream = ScriptedStream::new(vec![Vec::new()], 64);
+    stream.pending.extend(status(100));
+    let (v, lines) = collect(|sink| {
+        run_cdc(
+            stream,
+            &CdcVerb::Ping { count: 1 },
+            Duration::from_millis(30),
+            sink,
+        )
+    });
+    assert_eq!(v, Verdict::NoReply, "{lines:?}");
+}
+
+#[test]
+fn ping_matches_its_reply_and_reports_min_avg_max() {
+    // Each PING is answered by an ACK of another message and an IMU (no reply to a PING), then the
+    // reply: a STATUS, or an ACK of the PING itself.
+    let other = ack(cdc::MsgId::MotorEnable, 0);
+    let imu = frame(&cdc::Message::Imu(cdc::Imu::default()));
+    let replies = vec![
+        [other.clone(), imu.clone(), status(1)].concat(),
+        [imu.clone(), ack(cdc::MsgId::Ping, 0)].concat(),
+        [other, imu, status(3)].concat(),
+    ];
+    let stream = ScriptedStream::new(replies, 7);
+    let (v, lines) = collect(|sink| {
+        run_cdc(
+            stream,
+            &CdcVerb::Ping { count: 3 },
+            Duration::from_millis(50),
+            sink,
+        )
+    });
+    assert_eq!(v, Verdict::Done);
+    let replies: Vec<&Value> = lines.iter().filter_map(|l| l.get("reply")).collect();
+    assert_eq!(replies.len(), 3, "{lines:?}");
+    assert_eq!(replies[0]["type"], "status");
+    assert_eq!(replies[1]["type"], "ack");
+    assert_eq!(replies[1]["msg_id"], cdc::MsgId::Ping as u8);
+    assert_eq!(replies[2]["t_ms"], 3);
+    let last = lines.last().unwrap();
+    assert_eq!(last["replies"], 3);
+    let rtt = &last["round_trip_us"];
+    let (min, avg, max) = (
+        rtt["min"].as_f64().unwrap(),
+        rtt["avg"].as_f64().unwrap(),
+        rtt["max"].as_f64().unwrap(),
+    );
+    assert!(min <= avg && avg <= max, "{rtt}");
 }

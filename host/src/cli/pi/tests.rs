@@ -146,7 +146,7 @@ fn ping_reports_a_frozen_timestamp_as_stale() {
     assert_eq!(end["decoded"], 4);
     assert_eq!(end["update_time"]["advanced"], false);
     assert!(end["why"].as_str().unwrap().contains("frozen"));
-    assert_eq!(Verdict::NoReply.exit_code(), 3);
+    assert_eq!(Verdict::NoReply.exit_code(), 69);
 }
 
 #[test]
