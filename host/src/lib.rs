@@ -14,10 +14,12 @@ pub mod link;
 pub mod pacing;
 pub mod serial;
 pub mod simhost;
+pub mod simlink;
 pub mod transport;
 
 pub use bridge::{ArmState, Bridge, BridgeConfig, Diagnostic};
 pub use clocksync::{ClockSync, ClockSyncConfig};
 pub use kinematics::{DiffDrive, DiffDriveConfig, GeometryError};
 pub use simhost::SimHost;
+pub use simlink::{SimClock, SimConfig, SimMcu, Truth};
 pub use transport::{ByteStream, LinkError, Transport};
