@@ -22,6 +22,7 @@ macro_rules! out {
 
 use clap::{Args, Parser, Subcommand, ValueEnum};
 use motorlink::bridge::{Bridge, BridgeConfig};
+use motorlink::cli::amr_link::{self, AmrLinkArgs, AmrOpts};
 use motorlink::cli::device::{self, CdcVerb, DrivePlan, MovePlan, SendHex, TeensyVerb};
 use motorlink::cli::pi;
 use motorlink::cli::{self, FrameKind};
@@ -69,6 +70,9 @@ enum SerialKind {
     Teensy,
     /// Seed 004 over spidev (the device is /dev/spidevB.C): drive (and ping, monitor).
     PiSpi,
+    /// Seed 000, the AMR SPI link over spidev (/dev/spidevB.C): drive --v --w, estop (and arm,
+    /// disarm, rearm, teleop, top).
+    Spi,
 }
 
 /// What every board verb takes.
@@ -85,6 +89,37 @@ struct SerialArgs {
     /// How long to wait for each reply (ACK, echo, STATUS), ms.
     #[arg(long, default_value_t = 500)]
     wait_ms: u64,
+}
+
+/// The link of `drive` and `estop`: a serial board, a spidev device (--kind pi-spi, --kind spi),
+/// or the simulated AMR board (--sim, no device).
+#[derive(Args)]
+struct AnyLinkArgs {
+    /// Device: serial (/dev/ttyACM0, /dev/ttyUSB0, a pty such as /dev/pts/5) or spidev
+    /// (/dev/spidev0.0 with --kind spi or pi-spi); none with --sim.
+    #[arg(required_unless_present = "sim")]
+    device: Option<String>,
+    /// Link kind; each verb defaults to the protocol it speaks (--v, --w and --sim imply spi).
+    #[arg(long, value_enum)]
+    kind: Option<SerialKind>,
+    /// Baud rate (a USB CDC device and a pty ignore it).
+    #[arg(long, default_value_t = 115_200)]
+    baud: u32,
+    /// How long to wait for each reply (ACK, echo, STATUS), ms.
+    #[arg(long, default_value_t = 500)]
+    wait_ms: u64,
+}
+
+impl AnyLinkArgs {
+    /// The serial board's link (a device is required).
+    fn serial(self) -> Result<SerialArgs, String> {
+        Ok(SerialArgs {
+            device: self.device.ok_or("give the device (e.g. /dev/ttyACM0)")?,
+            kind: self.kind,
+            baud: self.baud,
+            wait_ms: self.wait_ms,
+        })
+    }
 }
 
 /// `on` / `off`.
@@ -239,17 +274,32 @@ enum Cmd {
         #[command(flatten)]
         link: SerialArgs,
     },
-    /// Seed 001: ESTOP engage|release, wait for its ACK.
+    /// Seed 001: ESTOP engage|release, wait for its ACK. AMR link (--kind spi, --sim): brake by a
+    /// frame gap, or check that no ESTOP holds (--release).
     ///
-    /// engage latches BRAKE at once. release clears this link's ESTOP; the board stays braked
-    /// until re-armed (`drive --enable`). Last line as for `enable` (msg_id 3).
+    /// Seed 001: engage latches BRAKE at once. release clears this link's ESTOP; the board stays
+    /// braked until re-armed (`drive --enable`). Last line as for `enable` (msg_id 3).
+    ///
+    /// AMR SPI link (`estop [--release] DEVICE --kind spi`, or `estop [--release] --sim`): the link
+    /// has no ESTOP message; the board's ESTOP is its own input. `estop` stops sending frames for
+    /// 20 ms: the ladder goes HOLD at 2 ms, STOP at 5 and BRAKE (latched, COMM_LOST) at 10 ms, the
+    /// fastest stop a host can cause; then enable-0 frames read the feedback back. Exit 0 if the
+    /// MCU shows BRAKE, 1 if not. Clear the latch with `rearm`. `estop --release` releases nothing
+    /// (there is nothing of the host's to release): it reads the feedback and exits 0 if no ESTOP
+    /// holds, 1 if the board's ESTOP input is still engaged (release it at the robot; `rearm` is
+    /// refused by the board until then).
     #[command(after_long_help = VERB_HELP)]
     Estop {
-        /// engage or release.
+        /// engage or release (seed 001; on the AMR link engage unless --release).
         #[arg(value_enum)]
-        action: EstopArg,
+        action: Option<EstopArg>,
         #[command(flatten)]
-        link: SerialArgs,
+        link: AnyLinkArgs,
+        /// The same as the action `release`.
+        #[arg(long, conflicts_with = "action")]
+        release: bool,
+        #[command(flatten)]
+        amr: AmrOpts,
     },
     /// Seed 001: send SET_MOTOR_PWM at a fixed rate for a while, then stop sending.
     ///
@@ -283,10 +333,18 @@ enum Cmd {
     /// Verdict: no_reply (exit 3) if update_time never advanced (no TxBuffer decoded, or a stale
     /// board); refused (exit 1) if commands ran for 0.2 s or more, some motor was commanded to move
     /// and none of those changed motor.position; done (exit 0) otherwise.
+    ///
+    /// AMR SPI link (`drive DEVICE --kind spi --v V --w W`, or `drive --sim --v V --w W`): runs the
+    /// 1 kHz bridge, arms (enable 0, then the 0->1 edge; the MCU must leave BRAKE within 0.5 s, else
+    /// exit 1 with the faults that hold it), commands the twist (v m/s, w rad/s, within the wheels'
+    /// 18 rad/s) for --seconds, then commands zero until the wheels stand and sends enable 0
+    /// (STOP); the same on Ctrl-C. Prints a summary of the MCU's feedback (distance and heading
+    /// from the wheel speeds, means over the second half, peaks, modes seen, diagnostics); --json
+    /// prints it as one object. Exit 0 done, 1 the MCU braked or refused to arm, 3 no feedback.
     #[command(after_long_help = VERB_HELP)]
     Drive {
         #[command(flatten)]
-        link: SerialArgs,
+        link: AnyLinkArgs,
         /// Duties of motors 1 to 4, -1000 ..= 1000 (full scale), e.g. --pwm 300,-300,0,0 (required
         /// for --kind serial).
         #[arg(long, allow_hyphen_values = true)]
@@ -306,6 +364,58 @@ enum Cmd {
         enable: bool,
         #[command(flatten)]
         pi: pi::PiDriveArgs,
+        /// AMR link: forward speed, m/s.
+        #[arg(long = "v", allow_hyphen_values = true)]
+        amr_v: Option<f64>,
+        /// AMR link: yaw rate, rad/s (counter-clockwise positive).
+        #[arg(long = "w", allow_hyphen_values = true)]
+        amr_w: Option<f64>,
+        #[command(flatten)]
+        amr: AmrOpts,
+    },
+    /// List serial ports (USB VID:PID, product, serial number) and spidev devices, with the link
+    /// kinds (--kind) each can serve. --json: {"devices":[{"path","bus","vid","pid",
+    /// "manufacturer","product","serial_number","kinds":[..],"note"}]}.
+    List {
+        /// Print JSON instead of text.
+        #[arg(long)]
+        json: bool,
+    },
+    /// AMR SPI link: arm (enable 0, then the 0->1 edge, then fresh frames) and report whether the
+    /// MCU left BRAKE.
+    ///
+    /// The drive stays armed only while frames keep coming: after the MCU's answer this verb
+    /// commands zero and enable 0 (STOP), and when it exits the board latches BRAKE (COMM_LOST)
+    /// 10 ms after its last frame. Use it to check that the drive can be armed; drive with
+    /// `drive` or `teleop`. Exit 0 the MCU left BRAKE, 1 it stayed (the faults holding it and what
+    /// to do are printed), 3 no valid feedback, 2 an error.
+    Arm {
+        #[command(flatten)]
+        link: AmrLinkArgs,
+    },
+    /// AMR SPI link: enable 0 (the ladder's STOP: zero speed under the speed loop, bounded
+    /// deceleration) until the wheels stand, at most --seconds; report the MCU's mode.
+    ///
+    /// Exit 0 the MCU left NORMAL/REDUCED and the wheels stand, 1 they still turn, 3 no feedback.
+    /// When the verb exits its frames end and the board latches BRAKE 10 ms later.
+    Disarm {
+        #[command(flatten)]
+        link: AmrLinkArgs,
+        /// The longest wait for the wheels to stand, s.
+        #[arg(long, default_value_t = 2.0)]
+        seconds: f64,
+    },
+    /// AMR SPI link: clear a BRAKE latch (the ladder's rule: an explicit re-arm, the enable 0->1
+    /// edge, plus fresh valid frames); the MCU decides.
+    ///
+    /// Runs the bridge until the MCU's feedback shows it out of BRAKE or 0.5 s pass, and reports
+    /// what it did. Exit 0 the MCU left BRAKE (or was not in BRAKE), 1 it stayed in BRAKE (a
+    /// latching cause is active: a held ESTOP input, overcurrent, ...; printed with what to do),
+    /// 3 no valid feedback. Then commands zero and enable 0; the board brakes again (COMM_LOST)
+    /// 10 ms after the verb's last frame: on this link a drive is armed while frames flow.
+    Rearm {
+        #[command(flatten)]
+        link: AmrLinkArgs,
     },
     /// Seed 003: MTRS to absolute angles at a fixed rate (or once), checking every echo.
     ///
@@ -811,6 +921,7 @@ fn pi_drive(
 /// Checks that a verb's `--kind` is the protocol it speaks.
 fn expect_kind(kind: Option<SerialKind>, want: SerialKind, instead: &str) -> Result<(), String> {
     match kind {
+        Some(SerialKind::Spi) if want != SerialKind::Spi => Err(NOT_AMR.into()),
         Some(SerialKind::PiSpi) if want != SerialKind::PiSpi => Err(NOT_PI.into()),
         Some(k) if k != want => Err(instead.to_string()),
         _ => Ok(()),
@@ -835,6 +946,8 @@ const NOT_TEENSY: &str =
     "this verb speaks seed 001 (--kind serial); for a seed 003 arm use move, cal, endeff, config";
 const NOT_PI: &str =
     "seed 004 (--kind pi-spi) has the verbs ping, monitor and drive (ping and monitor never command the motors)";
+const NOT_AMR: &str =
+    "the AMR SPI link (--kind spi) has the verbs drive --v --w, estop, arm, disarm, rearm, teleop, top";
 const NOT_SERIAL: &str =
     "this verb speaks seed 003 (--kind teensy); for a seed 001 board use enable, estop, drive";
 
@@ -846,7 +959,32 @@ fn board_verb(cmd: Cmd) -> Result<u8, String> {
             expect_kind(link.kind, SerialKind::Serial, NOT_TEENSY)?;
             cdc_verb(&link, &CdcVerb::Enable(on(state)))
         }
-        Cmd::Estop { action, link } => {
+        Cmd::Estop {
+            action,
+            link,
+            release,
+            amr,
+        } => {
+            if amr.sim || link.kind == Some(SerialKind::Spi) {
+                let release = release || matches!(action, Some(EstopArg::Release));
+                let verb = if release {
+                    amr_link::Verb::EstopRelease
+                } else {
+                    amr_link::Verb::Estop
+                };
+                return amr_link::exec(
+                    verb,
+                    link.device.as_deref(),
+                    amr_link::DEFAULT_SPI_HZ,
+                    &amr,
+                );
+            }
+            let action = match (action, release) {
+                (Some(a), _) => a,
+                (None, true) => EstopArg::Release,
+                (None, false) => return Err("estop needs engage or release (seed 001), or --kind spi / --sim for the AMR link".into()),
+            };
+            let link = link.serial()?;
             expect_kind(link.kind, SerialKind::Serial, NOT_TEENSY)?;
             let a = match action {
                 EstopArg::Engage => Estop::Engage,
@@ -862,7 +1000,35 @@ fn board_verb(cmd: Cmd) -> Result<u8, String> {
             seconds,
             enable,
             pi,
+            amr_v,
+            amr_w,
+            amr,
         } => {
+            let amr_given = amr.sim || amr_v.is_some() || amr_w.is_some();
+            if link.kind == Some(SerialKind::Spi) || (link.kind.is_none() && amr_given) {
+                if pwm.is_some() || enable || hz.is_some() {
+                    return Err("--pwm, --enable and --hz are the serial drive's; the AMR link takes --v and --w; nothing was sent".into());
+                }
+                if amr_v.is_none() && amr_w.is_none() {
+                    return Err(
+                        "drive on the AMR link needs --v (m/s) and/or --w (rad/s), e.g. --v 0.3"
+                            .into(),
+                    );
+                }
+                let verb = amr_link::Verb::Drive {
+                    v: amr_v.unwrap_or(0.0),
+                    w: amr_w.unwrap_or(0.0),
+                    seconds,
+                };
+                let speed = pi.speed.unwrap_or(amr_link::DEFAULT_SPI_HZ);
+                return amr_link::exec(verb, link.device.as_deref(), speed, &amr);
+            }
+            if amr_given {
+                return Err(
+                    "--v, --w and --sim are the AMR link's (--kind spi); nothing was sent".into(),
+                );
+            }
+            let link = link.serial()?;
             if link.kind == Some(SerialKind::PiSpi) {
                 return pi_drive(&link, pwm.is_some(), &pi, hz, seconds);
             }
@@ -931,8 +1097,28 @@ fn board_verb(cmd: Cmd) -> Result<u8, String> {
                 SerialKind::Serial => cdc_verb(&link, &CdcVerb::SendHex(h)),
                 SerialKind::Teensy => teensy_verb(&link, motors, &TeensyVerb::SendHex(h)),
                 SerialKind::PiSpi => Err(NOT_PI.into()),
+                SerialKind::Spi => Err(NOT_AMR.into()),
             }
         }
+        Cmd::List { json } => amr_link::exec_list(json),
+        Cmd::Arm { link } => amr_link::exec(
+            amr_link::Verb::Arm,
+            link.device.as_deref(),
+            link.speed,
+            &link.opts,
+        ),
+        Cmd::Rearm { link } => amr_link::exec(
+            amr_link::Verb::Rearm,
+            link.device.as_deref(),
+            link.speed,
+            &link.opts,
+        ),
+        Cmd::Disarm { link, seconds } => amr_link::exec(
+            amr_link::Verb::Disarm(seconds),
+            link.device.as_deref(),
+            link.speed,
+            &link.opts,
+        ),
         _ => Err("internal: not a board verb".into()),
     }
 }

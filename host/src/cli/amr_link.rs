@@ -31,6 +31,7 @@ use statemachine::{FaultFlags, Mode};
 
 use crate::bridge::{ArmState, Bridge, BridgeConfig, Diagnostic};
 use crate::pacing::{Pacer, PeriodStats};
+use crate::simlink::{SimClock, SimConfig, SimMcu, LOCKSTEP_RECV_US};
 use crate::transport::{LinkError, SpiTransport, Transport};
 
 pub mod list;
@@ -52,7 +53,8 @@ pub struct AmrOpts {
     #[arg(long, value_enum, default_value = "wall", hide = true)]
     pub sim_clock: SimClockArg,
     /// What the simulated board has been through before the verb starts (for tests): power-on,
-    /// driving (armed, 0.3 m/s), estop-held (its ESTOP input pressed and held).
+    /// driving (armed, 0.3 m/s), estop-held (its ESTOP input pressed and held), braked (driven,
+    /// then BRAKE latched by a frame gap).
     #[arg(long, value_enum, default_value = "power-on", hide = true)]
     pub sim_setup: SimSetup,
     /// Print one JSON object (the result) instead of text.
@@ -94,6 +96,8 @@ pub enum SimSetup {
     Driving,
     /// Its ESTOP input pressed and still held: BRAKE latched (ESTOP).
     EstopHeld,
+    /// Driven, then a frame gap: BRAKE latched (COMM_LOST), nothing holding it.
+    Braked,
 }
 
 /// How a verb ended; the exit status.
@@ -419,14 +423,21 @@ impl<P: Port> Session<P> {
                 return Err(e);
             }
         };
-        let ok_before = self.bridge.stats.feedback_ok;
+        let b = self.bridge.stats;
         self.bridge
             .on_frame(t_send, t_recv, cmd.seq, amr::decode_mcu_frame(&rx));
         let s = self.bridge.stats;
-        self.counters.feedback_ok = s.feedback_ok;
-        self.counters.feedback_rejected = s.feedback_rejected;
-        self.counters.not_accepted = s.not_accepted;
-        if s.feedback_ok != ok_before {
+        let c = &mut self.counters;
+        c.feedback_ok = c
+            .feedback_ok
+            .saturating_add(s.feedback_ok.saturating_sub(b.feedback_ok));
+        c.feedback_rejected = c
+            .feedback_rejected
+            .saturating_add(s.feedback_rejected.saturating_sub(b.feedback_rejected));
+        c.not_accepted = c
+            .not_accepted
+            .saturating_add(s.not_accepted.saturating_sub(b.not_accepted));
+        if s.feedback_ok != b.feedback_ok {
             self.last_feedback_us = Some(t_recv);
             if let Some(fb) = self.bridge.last_feedback {
                 self.history.push(Sample { t_us: t_recv, fb });
@@ -1140,9 +1151,127 @@ pub fn open(device: Option<&str>, speed: u32, opts: &AmrOpts) -> Result<Box<dyn 
     Ok(Box::new(Paced::new(t)))
 }
 
-fn open_sim(_opts: &AmrOpts) -> Result<Box<dyn Port>, String> {
-    Err("--sim: the simulated board is not part of this build".into())
+fn open_sim(opts: &AmrOpts) -> Result<Box<dyn Port>, String> {
+    let clock = match opts.sim_clock {
+        SimClockArg::Wall => SimClock::Wall,
+        SimClockArg::Lockstep => SimClock::Lockstep,
+    };
+    let mut mcu = SimMcu::new(SimConfig::new(clock)).map_err(|e| e.to_string())?;
+    if opts.sim_setup == SimSetup::EstopHeld {
+        mcu.set_estop(true);
+        mcu.idle(5);
+    }
+    Ok(Box::new(SimPort::new(mcu)))
 }
+
+/// The simulated board ([`SimMcu`]) as a port: on its own clock (lockstep: one board millisecond
+/// per exchange, the host's time is the board's) or on the wall clock (1 ms absolute deadlines).
+pub struct SimPort {
+    /// The simulated board.
+    pub mcu: SimMcu,
+    pacer: Pacer,
+    epoch: Instant,
+}
+
+impl SimPort {
+    /// `mcu` as a port.
+    pub fn new(mcu: SimMcu) -> Self {
+        Self {
+            mcu,
+            pacer: Pacer::contract(),
+            epoch: Instant::now(),
+        }
+    }
+
+    fn lockstep(&self) -> bool {
+        self.mcu.config().clock == SimClock::Lockstep
+    }
+
+    fn wall_us(&self) -> u64 {
+        u64::try_from(self.epoch.elapsed().as_micros()).unwrap_or(u64::MAX)
+    }
+}
+
+impl Port for SimPort {
+    fn begin_cycle(&mut self) -> u64 {
+        if self.lockstep() {
+            self.mcu.now_us()
+        } else {
+            self.pacer.wait();
+            self.wall_us()
+        }
+    }
+
+    fn exchange(
+        &mut self,
+        t_send: u64,
+        tx: &[u8; FRAME_LEN],
+        rx: &mut [u8; FRAME_LEN],
+    ) -> Result<u64, LinkError> {
+        self.mcu.exchange(tx, rx)?;
+        Ok(if self.lockstep() {
+            t_send.saturating_add(LOCKSTEP_RECV_US)
+        } else {
+            self.wall_us()
+        })
+    }
+
+    fn gap(&mut self, ms: u64) {
+        self.mcu.idle(ms);
+        if !self.lockstep() {
+            let stats = std::mem::replace(&mut self.pacer, Pacer::contract()).stats;
+            self.pacer.stats = stats;
+        }
+    }
+
+    fn name(&self) -> &str {
+        "sim"
+    }
+
+    fn pacing(&self) -> Option<&PeriodStats> {
+        (!self.lockstep()).then_some(&self.pacer.stats)
+    }
+
+    fn truth(&self) -> Option<Value> {
+        serde_json::to_value(self.mcu.truth()).ok()
+    }
+}
+
+/// `--sim-setup driving` and `braked`: the simulated board armed and driving straight at
+/// [`SETUP_V`] for 1 s (and, for `braked`, then a frame gap that latches BRAKE), on the verb's
+/// own session, so its sequence numbers carry on. The counters start again afterwards.
+fn sim_setup<P: Port>(s: &mut Session<P>, setup: SimSetup) -> Result<(), String> {
+    if !matches!(setup, SimSetup::Driving | SimSetup::Braked) {
+        return Ok(());
+    }
+    let mut never = || false;
+    let armed = s
+        .arm_and_wait(WAIT_MS, &mut never)
+        .map_err(|e| e.to_string())?;
+    if armed != ArmResult::Armed {
+        return Err("--sim-setup: the simulated board did not arm".into());
+    }
+    for _ in 0..1_000 {
+        s.bridge.cmd_vel(s.now_us, SETUP_V, 0.0);
+        s.cycle().map_err(|e| e.to_string())?;
+    }
+    if setup == SimSetup::Braked {
+        s.gap(ESTOP_GAP_MS);
+        s.bridge.disarm();
+        s.run(SETTLE_CYCLES, &mut never)
+            .map_err(|e| e.to_string())?;
+    }
+    s.counters = LinkCounters::default();
+    s.modes_seen = s
+        .feedback()
+        .map(|f| mode_name(f.mode))
+        .into_iter()
+        .collect();
+    Ok(())
+}
+
+/// The forward speed of `--sim-setup driving`, m/s.
+pub const SETUP_V: f64 = 0.3;
 
 impl Port for Box<dyn Port> {
     fn begin_cycle(&mut self) -> u64 {
@@ -1221,6 +1350,9 @@ pub fn run_verb(
     }
     let port = open(device, speed, opts)?;
     let mut s = Session::new(port);
+    if opts.sim {
+        sim_setup(&mut s, opts.sim_setup)?;
+    }
     let r = match verb {
         Verb::Arm => arm(&mut s, "arm", stop),
         Verb::Rearm => arm(&mut s, "rearm", stop),
@@ -1236,6 +1368,32 @@ pub fn run_verb(
         print(r.text().trim_end());
     }
     Ok(r.verdict.exit_code())
+}
+
+/// Writes one report to standard output; a closed pipe or a failed write is ignored (the verb
+/// has already stopped the robot by then).
+pub fn print_stdout(text: &str) {
+    use std::io::Write as _;
+    let _ = writeln!(std::io::stdout().lock(), "{text}");
+}
+
+/// Runs an AMR-link verb as the binary does: SIGINT, SIGTERM and SIGHUP end it early (after the
+/// verb has commanded zero and disarmed), the report goes to standard output.
+pub fn exec(verb: Verb, device: Option<&str>, speed: u32, opts: &AmrOpts) -> Result<u8, String> {
+    let mut signals = super::pi::Signals::block()?;
+    let mut stop = || signals.received();
+    run_verb(verb, device, speed, opts, &mut stop, &mut print_stdout)
+}
+
+/// `list`: prints the devices found (text, or JSON with `json`).
+pub fn exec_list(json: bool) -> Result<u8, String> {
+    let found = list::discover()?;
+    if json {
+        print_stdout(&list::json(&found).to_string());
+    } else {
+        print_stdout(list::text(&found).trim_end());
+    }
+    Ok(0)
 }
 
 #[cfg(test)]

@@ -1,0 +1,203 @@
+//! `motorlink`'s AMR SPI link verbs run as a binary against the simulated board (`--sim`) on its
+//! lockstep clock, so each run is deterministic on a loaded machine: what the MCU's feedback and
+//! the simulated robot's ground truth show after `drive`, `rearm`, `disarm`, `estop`, and `list`.
+#![allow(
+    clippy::unwrap_used,
+    clippy::expect_used,
+    clippy::indexing_slicing,
+    clippy::panic
+)]
+
+use std::process::Command;
+
+use serde_json::Value;
+
+fn motorlink(args: &[&str]) -> (i32, String, String) {
+    let out = Command::new(env!("CARGO_BIN_EXE_motorlink"))
+        .args(args)
+        .output()
+        .unwrap();
+    (
+        out.status.code().unwrap_or(-1),
+        String::from_utf8_lossy(&out.stdout).into_owned(),
+        String::from_utf8_lossy(&out.stderr).into_owned(),
+    )
+}
+
+/// Runs a verb on the lockstep simulated board with `--json`: exit status and the report.
+fn sim(args: &[&str]) -> (i32, Value) {
+    let mut all = args.to_vec();
+    all.extend(["--sim", "--sim-clock", "lockstep", "--json"]);
+    let (code, out, err) = motorlink(&all);
+    let report: Value = serde_json::from_str(out.trim())
+        .unwrap_or_else(|e| panic!("{args:?}: {e}: stdout {out:?} stderr {err:?}"));
+    (code, report)
+}
+
+fn f(v: &Value) -> f64 {
+    v.as_f64().unwrap_or_else(|| panic!("not a number: {v}"))
+}
+
+fn faults(v: &Value) -> Vec<String> {
+    v["faults"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|x| x.as_str().unwrap().to_string())
+        .collect()
+}
+
+#[test]
+fn drive_forward_moves_the_robot_forward_and_ends_stopped() {
+    let (code, r) = sim(&["drive", "--v", "0.3", "--seconds", "1"]);
+    assert_eq!(code, 0, "{r}");
+    assert_eq!(r["verdict"], "done");
+    let d = &r["drive"];
+    // 0.3 m/s for 1 s: 0.3 m, less the acceleration ramp, plus the ramp down after it.
+    assert!((0.2..0.4).contains(&f(&d["distance_m"])), "{d}");
+    assert!((f(&d["mean_v_mps"]) - 0.3).abs() < 0.03, "{d}");
+    assert!(f(&d["heading_rad"]).abs() < 0.01, "{d}");
+    // The simulated robot's own pose agrees with what the feedback integrated to.
+    let t = &r["sim_truth"];
+    assert!((f(&t["x_m"]) - f(&d["distance_m"])).abs() < 0.02, "{t}");
+    assert!(f(&t["y_m"]).abs() < 0.01);
+    // Ended commanded to zero and disarmed: STOP, wheels standing.
+    assert_eq!(r["after"]["mode"], "STOP");
+    assert!(f(&t["v_mps"]).abs() < 0.01, "{t}");
+    assert_eq!(r["before"]["mode"], "BRAKE");
+}
+
+#[test]
+fn drive_backward_turning_left_goes_backward_and_turns_left() {
+    let (code, r) = sim(&["drive", "--v", "-0.2", "--w", "0.5", "--seconds", "1"]);
+    assert_eq!(code, 0, "{r}");
+    let t = &r["sim_truth"];
+    assert!(f(&t["x_m"]) < -0.1, "{t}");
+    // 0.5 rad/s for about a second: about 0.5 rad counter-clockwise.
+    assert!((0.35..0.65).contains(&f(&t["theta_rad"])), "{t}");
+    assert!(f(&r["drive"]["distance_m"]) < -0.1);
+}
+
+#[test]
+fn rearm_clears_a_comm_loss_brake_latch() {
+    let (code, r) = sim(&["rearm", "--sim-setup", "braked"]);
+    assert_eq!(code, 0, "{r}");
+    let before = &r["before"];
+    assert_eq!(before["mode"], "BRAKE");
+    assert!(
+        faults(before).contains(&"COMM_LOST".to_string()),
+        "{before}"
+    );
+    let modes: Vec<&str> = r["modes_seen"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|m| m.as_str().unwrap())
+        .collect();
+    assert_eq!(modes[0], "BRAKE");
+    assert!(modes[1..].iter().any(|m| *m != "BRAKE"), "{modes:?}");
+    assert!(r["message"].as_str().unwrap().contains("left BRAKE"));
+}
+
+#[test]
+fn rearm_is_refused_while_the_board_estop_holds() {
+    let (code, r) = sim(&["rearm", "--sim-setup", "estop-held"]);
+    assert_eq!(code, 1, "{r}");
+    assert_eq!(r["verdict"], "refused");
+    assert_eq!(r["after"]["mode"], "BRAKE");
+    assert!(faults(&r["after"]).contains(&"ESTOP".to_string()));
+    assert_eq!(r["modes_seen"], serde_json::json!(["BRAKE"]));
+    assert!(r["message"].as_str().unwrap().contains("ESTOP input"));
+    assert_eq!(r["sim_truth"]["braked"], true);
+}
+
+#[test]
+fn estop_brakes_a_driving_robot_by_a_frame_gap() {
+    let (code, r) = sim(&["estop", "--sim-setup", "driving"]);
+    assert_eq!(code, 0, "{r}");
+    assert_ne!(r["before"]["mode"], "BRAKE");
+    assert_eq!(r["after"]["mode"], "BRAKE");
+    assert!(faults(&r["after"]).contains(&"COMM_LOST".to_string()));
+    assert_eq!(r["counters"]["gaps"], 1);
+    assert_eq!(r["sim_truth"]["braked"], true);
+}
+
+#[test]
+fn estop_release_reports_whether_the_board_estop_holds() {
+    let (code, r) = sim(&["estop", "--release", "--sim-setup", "estop-held"]);
+    assert_eq!(code, 1, "{r}");
+    assert!(r["message"].as_str().unwrap().contains("still engaged"));
+    // Nothing holds on a board just powered on; the action word works as well as --release.
+    let (code, r) = sim(&["estop", "release"]);
+    assert_eq!(code, 0, "{r}");
+    assert!(r["message"].as_str().unwrap().contains("rearm"));
+}
+
+#[test]
+fn disarm_stops_a_driving_robot_under_control() {
+    let (code, r) = sim(&["disarm", "--sim-setup", "driving"]);
+    assert_eq!(code, 0, "{r}");
+    let before = &r["before"];
+    // Driving at 0.3 m/s: 3.75 rad/s on 0.08 m wheels.
+    assert!(f(&before["wheel_radps"][0]) > 3.0, "{before}");
+    // enable 0 is the ladder's STOP (not BRAKE): the speed loop holds zero.
+    assert_eq!(r["after"]["mode"], "STOP");
+    assert!(f(&r["after"]["wheel_radps"][0]).abs() < 0.05);
+    assert!(f(&r["sim_truth"]["v_mps"]).abs() < 0.01);
+    assert_eq!(r["sim_truth"]["braked"], false);
+}
+
+#[test]
+fn list_json_parses_and_names_the_kinds() {
+    let (code, out, err) = motorlink(&["list", "--json"]);
+    assert_eq!(code, 0, "{err}");
+    let v: Value = serde_json::from_str(out.trim()).unwrap();
+    let devices = v["devices"].as_array().unwrap();
+    for d in devices {
+        assert!(d["path"].as_str().unwrap().starts_with("/dev/"), "{d}");
+        assert!(!d["kinds"].as_array().unwrap().is_empty(), "{d}");
+    }
+}
+
+#[test]
+fn bad_twists_and_mixed_options_are_refused_before_anything_is_sent() {
+    let (code, _, err) = motorlink(&["drive", "--sim", "--v", "2"]);
+    assert_eq!(code, 2);
+    assert!(err.contains("1.44"), "{err}");
+    let (code, _, err) = motorlink(&["drive", "/dev/ttyACM0", "--kind", "serial", "--v", "0.3"]);
+    assert_eq!(code, 2);
+    assert!(err.contains("nothing was sent"), "{err}");
+    let (code, _, err) = motorlink(&["drive", "--sim", "--v", "0.3", "--pwm", "1,1,1,1"]);
+    assert_eq!(code, 2);
+    assert!(err.contains("--pwm"), "{err}");
+    let (code, _, err) = motorlink(&["drive", "--sim"]);
+    assert_eq!(code, 2);
+    assert!(err.contains("--v"), "{err}");
+}
+
+#[test]
+fn text_output_names_mode_and_verdict() {
+    let (code, out, _) = motorlink(&["rearm", "--sim", "--sim-clock", "lockstep"]);
+    assert_eq!(code, 0);
+    assert!(out.starts_with("rearm: done (sim)"), "{out}");
+    assert!(out.contains("mode BRAKE"), "{out}");
+    assert!(out.contains("POWER_ON"), "{out}");
+}
+
+#[test]
+fn help_documents_the_amr_verbs() {
+    for (verb, words) in [
+        ("arm", &["BRAKE", "--sim", "--json"][..]),
+        ("rearm", &["latch", "ESTOP"][..]),
+        ("disarm", &["STOP"][..]),
+        ("estop", &["frame gap", "--release", "engage"][..]),
+        ("drive", &["--v", "--w", "--sim", "--pwm"][..]),
+        ("list", &["spidev", "--json"][..]),
+    ] {
+        let (code, help, _) = motorlink(&[verb, "--help"]);
+        assert_eq!(code, 0, "{verb}");
+        for w in words {
+            assert!(help.contains(w), "{verb} --help lacks {w}: {help}");
+        }
+    }
+}
