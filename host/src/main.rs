@@ -154,6 +154,8 @@ Exit status:
 The device is opened exclusively in raw mode; bytes that arrived before the open are dropped, so
 each run sees only replies to itself. Several runs in sequence on one pty (QEMU -serial pty) work.";
 
+// Parsed once per run: the size of the largest verb (drive's options) does not matter.
+#[allow(clippy::large_enum_variant)]
 #[derive(Subcommand)]
 enum Cmd {
     /// Run the built-in scenarios (or the given scenario files) and write traces, table and plots.
