@@ -419,6 +419,46 @@ enum Cmd {
         #[command(flatten)]
         link: AmrLinkArgs,
     },
+    /// AMR SPI link: live view in the terminal (mode, feedback age, wheel speeds, currents,
+    /// faults, link counters, clock sync, plots of the wheel speeds and the mode).
+    ///
+    /// Watches only: it sends enable-0 frames (the MCU needs frames to answer; enable 0 never
+    /// moves the robot) and never arms. Ends with q, Esc, Ctrl-C or --seconds; the terminal is
+    /// always restored, then the run's summary is printed (--json: as one object). The `monitor`
+    /// verb prints JSON lines instead.
+    Top {
+        #[command(flatten)]
+        link: AmrLinkArgs,
+        /// Stop after this long, s (default: until q).
+        #[arg(long)]
+        seconds: Option<f64>,
+    },
+    /// AMR SPI link: drive with the keyboard, in the live view of `top`.
+    ///
+    /// Arms at start. w/s or up/down step v by 0.05 m/s, a/d or left/right step w by 0.25 rad/s
+    /// (within --max-v, --max-w); space: zero; x: stop by a frame gap (BRAKE latched); r: re-arm;
+    /// q, Esc or Ctrl-C: command zero, wait for the wheels to stand, enable 0, quit. The twist is
+    /// sent only while keys keep coming: for --hold-ms after the last key (a held key repeats, and
+    /// repeats of the same key within 100 ms keep it alive without stepping again). Then nothing is
+    /// sent and the bridge's 200 ms cmd_vel staleness rule ramps the wheels to zero, so a dead
+    /// terminal or a lost ssh session stops the robot; the twist is forgotten (the next key starts
+    /// from zero). The terminal is always restored.
+    Teleop {
+        #[command(flatten)]
+        link: AmrLinkArgs,
+        /// Largest forward speed, m/s.
+        #[arg(long, default_value_t = amr_link::teleop::TeleopConfig::DEFAULT.max_v)]
+        max_v: f64,
+        /// Largest yaw rate, rad/s.
+        #[arg(long, default_value_t = amr_link::teleop::TeleopConfig::DEFAULT.max_w)]
+        max_w: f64,
+        /// How long the twist is still sent after the last key, ms.
+        #[arg(long, default_value_t = 750)]
+        hold_ms: u64,
+        /// Stop after this long, s (default: until q).
+        #[arg(long)]
+        seconds: Option<f64>,
+    },
     /// Seed 003: MTRS to absolute angles at a fixed rate (or once), checking every echo.
     ///
     /// Every echo must come back with cmd_success 1: a refusal stops the sending at once (exit 1),
@@ -1114,6 +1154,31 @@ fn board_verb(cmd: Cmd) -> Result<u8, String> {
             link.device.as_deref(),
             link.speed,
             &link.opts,
+        ),
+        Cmd::Top { link, seconds } => amr_link::exec_tui(
+            None,
+            link.device.as_deref(),
+            link.speed,
+            &link.opts,
+            seconds,
+        ),
+        Cmd::Teleop {
+            link,
+            max_v,
+            max_w,
+            hold_ms,
+            seconds,
+        } => amr_link::exec_tui(
+            Some(amr_link::teleop::TeleopConfig {
+                max_v,
+                max_w,
+                hold_us: hold_ms.saturating_mul(1000),
+                ..amr_link::teleop::TeleopConfig::DEFAULT
+            }),
+            link.device.as_deref(),
+            link.speed,
+            &link.opts,
+            seconds,
         ),
         Cmd::Disarm { link, seconds } => amr_link::exec(
             amr_link::Verb::Disarm(seconds),

@@ -1141,7 +1141,11 @@ pub fn drive<P: Port>(
 }
 
 /// Opens the port of an AMR-link verb: the spidev device, or the simulated board with its setup.
-pub fn open(device: Option<&str>, speed: u32, opts: &AmrOpts) -> Result<Box<dyn Port>, String> {
+pub fn open(
+    device: Option<&str>,
+    speed: u32,
+    opts: &AmrOpts,
+) -> Result<Box<dyn Port + Send>, String> {
     if opts.sim {
         return open_sim(opts);
     }
@@ -1151,7 +1155,7 @@ pub fn open(device: Option<&str>, speed: u32, opts: &AmrOpts) -> Result<Box<dyn 
     Ok(Box::new(Paced::new(t)))
 }
 
-fn open_sim(opts: &AmrOpts) -> Result<Box<dyn Port>, String> {
+fn open_sim(opts: &AmrOpts) -> Result<Box<dyn Port + Send>, String> {
     let clock = match opts.sim_clock {
         SimClockArg::Wall => SimClock::Wall,
         SimClockArg::Lockstep => SimClock::Lockstep,
@@ -1273,7 +1277,7 @@ fn sim_setup<P: Port>(s: &mut Session<P>, setup: SimSetup) -> Result<(), String>
 /// The forward speed of `--sim-setup driving`, m/s.
 pub const SETUP_V: f64 = 0.3;
 
-impl Port for Box<dyn Port> {
+impl Port for Box<dyn Port + Send> {
     fn begin_cycle(&mut self) -> u64 {
         (**self).begin_cycle()
     }
@@ -1383,6 +1387,53 @@ pub fn exec(verb: Verb, device: Option<&str>, speed: u32, opts: &AmrOpts) -> Res
     let mut signals = super::pi::Signals::block()?;
     let mut stop = || signals.received();
     run_verb(verb, device, speed, opts, &mut stop, &mut print_stdout)
+}
+
+/// `top` (watch) and `teleop` (drive with the keyboard, `Some` config): the live view until q,
+/// Ctrl-C or `seconds`; the terminal is restored before the report is printed.
+pub fn exec_tui(
+    teleop: Option<teleop::TeleopConfig>,
+    device: Option<&str>,
+    speed: u32,
+    opts: &AmrOpts,
+    seconds: Option<f64>,
+) -> Result<u8, String> {
+    let verb = if teleop.is_some() { "teleop" } else { "top" };
+    if opts.sim && opts.sim_clock == SimClockArg::Lockstep {
+        return Err(format!(
+            "{verb} runs on the wall clock: drop --sim-clock lockstep"
+        ));
+    }
+    if let Some(sec) = seconds {
+        if !(sec.is_finite() && sec > 0.0) {
+            return Err(format!("--seconds {sec}: give a duration above 0"));
+        }
+    }
+    if let Some(c) = teleop {
+        check_twist(c.max_v, c.max_w).map_err(|e| format!("--max-v / --max-w: {e}"))?;
+        if !(c.max_v > 0.0 && c.max_w > 0.0 && c.hold_us > 0) {
+            return Err("--max-v, --max-w and --hold-ms must be above 0; nothing was sent".into());
+        }
+    }
+    let mut signals = super::pi::Signals::block()?;
+    let port = open(device, speed, opts)?;
+    let mut s = Session::new(port);
+    s.history = History::new(6_000);
+    if opts.sim {
+        sim_setup(&mut s, opts.sim_setup)?;
+    }
+    let driver = match teleop {
+        Some(c) => top::Driver::Teleop(teleop::Teleop::new(c)),
+        None => top::Driver::Watch,
+    };
+    let mut stop = || signals.received();
+    let r = top::run(&mut s, verb, driver, seconds, &mut stop)?;
+    if opts.json {
+        print_stdout(&r.json().to_string());
+    } else {
+        print_stdout(r.text().trim_end());
+    }
+    Ok(r.verdict.exit_code())
 }
 
 /// `list`: prints the devices found (text, or JSON with `json`).
