@@ -201,3 +201,86 @@ fn help_documents_the_amr_verbs() {
         }
     }
 }
+
+/// `teleop` on a pseudo-terminal (the test is its keyboard and screen), on the paced simulated
+/// board: keys tapped and then held drive the robot forward, `q` stops it, and the terminal is
+/// given back (the alternate screen left, the cursor shown) before the report is printed.
+#[test]
+fn teleop_drives_while_keys_come_and_q_stops_and_restores_the_terminal() {
+    use std::io::{Read, Write};
+    use std::process::Stdio;
+    use std::time::Duration;
+
+    let size = nix::pty::Winsize {
+        ws_row: 32,
+        ws_col: 120,
+        ws_xpixel: 0,
+        ws_ypixel: 0,
+    };
+    let pty = nix::pty::openpty(Some(&size), None).unwrap();
+    let child = Command::new(env!("CARGO_BIN_EXE_motorlink"))
+        .args([
+            "teleop",
+            "--sim",
+            "--sim-clock",
+            "paced",
+            "--json",
+            "--seconds",
+            "60",
+        ])
+        .stdin(Stdio::from(pty.slave.try_clone().unwrap()))
+        .stdout(Stdio::from(pty.slave.try_clone().unwrap()))
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    drop(pty.slave);
+    let mut master = std::fs::File::from(pty.master);
+    let mut reader = master.try_clone().unwrap();
+    // The screen: read until the child closes the terminal (EIO on the master).
+    let screen = std::thread::spawn(move || {
+        let mut all = Vec::new();
+        let mut buf = [0u8; 65536];
+        while let Ok(n) = reader.read(&mut buf) {
+            if n == 0 {
+                break;
+            }
+            all.extend_from_slice(&buf[..n]);
+        }
+        all
+    });
+    std::thread::sleep(Duration::from_millis(1500));
+    // Two taps, then the key held (a terminal repeats it every 40 ms) for 1.5 s.
+    for _ in 0..2 {
+        master.write_all(b"w").unwrap();
+        std::thread::sleep(Duration::from_millis(250));
+    }
+    for _ in 0..38 {
+        master.write_all(b"w").unwrap();
+        std::thread::sleep(Duration::from_millis(40));
+    }
+    master.write_all(b"q").unwrap();
+    let out = child.wait_with_output().unwrap();
+    drop(master);
+    let screen = String::from_utf8_lossy(&screen.join().unwrap()).into_owned();
+    assert_eq!(
+        out.status.code(),
+        Some(0),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let restored = screen
+        .rfind("\u{1b}[?1049l")
+        .expect("the alternate screen was left");
+    let report = &screen[restored..];
+    assert!(report.contains("\u{1b}[?25h"), "the cursor is shown again");
+    let json = &report[report.find('{').unwrap()..];
+    let r: Value = serde_json::from_str(json.trim()).unwrap();
+    assert_eq!(r["verb"], "teleop");
+    // Drawn while it ran: the view's mode line.
+    assert!(screen[..restored].contains("mode "), "nothing drawn");
+    // It moved forward (0.1 m/s or more for over a second), and q left it standing, disarmed.
+    let t = &r["sim_truth"];
+    assert!(f(&t["x_m"]) > 0.05, "{t}");
+    assert!(f(&t["v_mps"]).abs() < 0.01, "{t}");
+    assert_eq!(r["after"]["mode"], "STOP", "{r}");
+}

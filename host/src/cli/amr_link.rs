@@ -48,9 +48,11 @@ pub struct AmrOpts {
     /// device: no hardware needed. It starts as a board does, BRAKE latched after power-on.
     #[arg(long)]
     pub sim: bool,
-    /// The simulated board's clock: wall (real time) or lockstep (one board millisecond per
-    /// exchange, deterministic; for tests).
-    #[arg(long, value_enum, default_value = "wall", hide = true)]
+    /// The simulated board's clock: wall (its ticks follow real time: a host thread starved for
+    /// 10 ms brakes it, as it would a real board), paced (one board millisecond per exchange, the
+    /// exchanges paced at 1 kHz: real time, immune to a loaded machine's scheduling), lockstep
+    /// (one board millisecond per exchange, as fast as possible: deterministic, for tests).
+    #[arg(long, value_enum, default_value = "wall")]
     pub sim_clock: SimClockArg,
     /// What the simulated board has been through before the verb starts (for tests): power-on,
     /// driving (armed, 0.3 m/s), estop-held (its ESTOP input pressed and held), braked (driven,
@@ -82,6 +84,8 @@ pub enum SimClockArg {
     /// The board's ticks follow wall time.
     #[default]
     Wall,
+    /// One board millisecond per exchange, exchanges at 1 kHz on the wall clock.
+    Paced,
     /// One board millisecond per exchange: deterministic.
     Lockstep,
 }
@@ -511,18 +515,25 @@ impl<P: Port> Session<P> {
         Ok(ArmResult::Refused)
     }
 
-    /// Commands zero until both wheels are below 0.05 rad/s (at most `max_ms`), then enable 0 for
-    /// [`SETTLE_CYCLES`]: the MCU ends in STOP with the speed loop holding zero.
+    /// Commands zero until both wheels have been below [`STILL_RADPS`] for [`STILL_CYCLES`]
+    /// feedbacks in a row (at most `max_ms`), then enable 0 for [`SETTLE_CYCLES`]: the MCU ends in
+    /// STOP with the speed loop holding zero.
     pub fn stop_and_disarm(&mut self, max_ms: u64) -> Result<(), LinkError> {
         if self.bridge.state() == ArmState::Armed {
+            let mut still_for = 0u64;
             for _ in 0..max_ms {
                 self.bridge.cmd_vel(self.now_us, 0.0, 0.0);
                 self.cycle()?;
                 let still = self.feedback().is_none_or(|f| {
                     f.left_speed.abs() < STILL_RADPS && f.right_speed.abs() < STILL_RADPS
                 });
-                let out = self.bridge.output();
-                if still && out.iter().all(|o| o.abs() < 1e-9) {
+                let zero = self.bridge.output().iter().all(|o| o.abs() < 1e-9);
+                still_for = if still && zero {
+                    still_for.saturating_add(1)
+                } else {
+                    0
+                };
+                if still_for >= STILL_CYCLES {
                     break;
                 }
             }
@@ -536,6 +547,9 @@ impl<P: Port> Session<P> {
 
 /// Cycles of enable 0 before an arming edge and after a stop.
 pub const SETTLE_CYCLES: u64 = 20;
+
+/// Feedbacks in a row with both wheels standing before the drive is disabled.
+pub const STILL_CYCLES: u64 = 50;
 
 /// A wheel slower than this counts as standing, rad/s.
 pub const STILL_RADPS: f32 = 0.05;
@@ -1158,21 +1172,26 @@ pub fn open(
 fn open_sim(opts: &AmrOpts) -> Result<Box<dyn Port + Send>, String> {
     let clock = match opts.sim_clock {
         SimClockArg::Wall => SimClock::Wall,
-        SimClockArg::Lockstep => SimClock::Lockstep,
+        SimClockArg::Paced | SimClockArg::Lockstep => SimClock::Lockstep,
     };
     let mut mcu = SimMcu::new(SimConfig::new(clock)).map_err(|e| e.to_string())?;
     if opts.sim_setup == SimSetup::EstopHeld {
         mcu.set_estop(true);
         mcu.idle(5);
     }
-    Ok(Box::new(SimPort::new(mcu)))
+    let mut port = SimPort::new(mcu);
+    port.paced = opts.sim_clock == SimClockArg::Paced;
+    Ok(Box::new(port))
 }
 
 /// The simulated board ([`SimMcu`]) as a port: on its own clock (lockstep: one board millisecond
-/// per exchange, the host's time is the board's) or on the wall clock (1 ms absolute deadlines).
+/// per exchange, the host's time is the board's; `paced`: those exchanges at 1 kHz on the wall
+/// clock) or on the wall clock (1 ms absolute deadlines).
 pub struct SimPort {
     /// The simulated board.
     pub mcu: SimMcu,
+    /// A lockstep board's exchanges wait for 1 kHz deadlines.
+    pub paced: bool,
     pacer: Pacer,
     epoch: Instant,
 }
@@ -1182,6 +1201,7 @@ impl SimPort {
     pub fn new(mcu: SimMcu) -> Self {
         Self {
             mcu,
+            paced: false,
             pacer: Pacer::contract(),
             epoch: Instant::now(),
         }
@@ -1199,6 +1219,9 @@ impl SimPort {
 impl Port for SimPort {
     fn begin_cycle(&mut self) -> u64 {
         if self.lockstep() {
+            if self.paced {
+                self.pacer.wait();
+            }
             self.mcu.now_us()
         } else {
             self.pacer.wait();
@@ -1222,7 +1245,10 @@ impl Port for SimPort {
 
     fn gap(&mut self, ms: u64) {
         self.mcu.idle(ms);
-        if !self.lockstep() {
+        if self.paced {
+            std::thread::sleep(Duration::from_millis(ms));
+        }
+        if !self.lockstep() || self.paced {
             let stats = std::mem::replace(&mut self.pacer, Pacer::contract()).stats;
             self.pacer.stats = stats;
         }
@@ -1233,7 +1259,7 @@ impl Port for SimPort {
     }
 
     fn pacing(&self) -> Option<&PeriodStats> {
-        (!self.lockstep()).then_some(&self.pacer.stats)
+        (!self.lockstep() || self.paced).then_some(&self.pacer.stats)
     }
 
     fn truth(&self) -> Option<Value> {
