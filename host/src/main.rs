@@ -97,7 +97,6 @@ struct SerialArgs {
 struct AnyLinkArgs {
     /// Device: serial (/dev/ttyACM0, /dev/ttyUSB0, a pty such as /dev/pts/5) or spidev
     /// (/dev/spidev0.0 with --kind spi or pi-spi); none with --sim.
-    #[arg(required_unless_present = "sim")]
     device: Option<String>,
     /// Link kind; each verb defaults to the protocol it speaks (--v, --w and --sim imply spi).
     #[arg(long, value_enum)]
@@ -292,9 +291,9 @@ enum Cmd {
     /// refused by the board until then).
     #[command(after_long_help = VERB_HELP)]
     Estop {
-        /// engage or release (seed 001; on the AMR link engage unless --release).
-        #[arg(value_enum)]
-        action: Option<EstopArg>,
+        /// engage | release (seed 001). On the AMR link optional (engage unless --release), and
+        /// the device may come first: `estop /dev/spidev0.0 --kind spi`.
+        action: Option<String>,
         #[command(flatten)]
         link: AnyLinkArgs,
         /// The same as the action `release`.
@@ -1007,6 +1006,22 @@ fn board_verb(cmd: Cmd) -> Result<u8, String> {
             release,
             amr,
         } => {
+            let word = |w: &str| match w {
+                "engage" => Some(EstopArg::Engage),
+                "release" => Some(EstopArg::Release),
+                _ => None,
+            };
+            let mut link = link;
+            let action = match action {
+                Some(a) if word(&a).is_none() && link.device.is_none() => {
+                    link.device = Some(a);
+                    None
+                }
+                Some(a) => Some(word(&a).ok_or_else(|| {
+                    format!("estop: '{a}' is neither engage nor release; nothing was sent")
+                })?),
+                None => None,
+            };
             if amr.sim || link.kind == Some(SerialKind::Spi) {
                 let release = release || matches!(action, Some(EstopArg::Release));
                 let verb = if release {

@@ -176,6 +176,22 @@ fn bad_twists_and_mixed_options_are_refused_before_anything_is_sent() {
 }
 
 #[test]
+fn estop_takes_the_device_first_and_keeps_the_serial_words() {
+    // The device in the action's place: the AMR link (no such device here: an open error).
+    let (code, _, err) = motorlink(&["estop", "/dev/spidev-none", "--kind", "spi"]);
+    assert_eq!(code, 2);
+    assert!(err.contains("cannot open /dev/spidev-none"), "{err}");
+    // A word that is neither action nor device path: refused before anything is opened.
+    let (code, _, err) = motorlink(&["estop", "stop", "/dev/ttyACM0"]);
+    assert_eq!(code, 2);
+    assert!(err.contains("neither engage nor release"), "{err}");
+    // Seed 001 still needs its action.
+    let (code, _, err) = motorlink(&["estop", "/dev/ttyACM-none"]);
+    assert_eq!(code, 2);
+    assert!(err.contains("engage or release"), "{err}");
+}
+
+#[test]
 fn text_output_names_mode_and_verdict() {
     let (code, out, _) = motorlink(&["rearm", "--sim", "--sim-clock", "lockstep"]);
     assert_eq!(code, 0);
