@@ -42,7 +42,7 @@ use statemachine::Estop;
 #[command(
     name = "motorlink",
     version,
-    about = "Host side of the AMR motor controller: simulator, frame tools, device monitor, serial board verbs, and the Raspberry Pi SPI verbs of seed 004 (ping, monitor, drive --kind pi-spi)"
+    about = "Host side of the AMR motor controller: simulator, frame tools, device monitor, serial board verbs, the Raspberry Pi SPI verbs of seed 004 (ping, monitor, drive --kind pi-spi), and the operator's verbs of the AMR SPI link (list, arm, rearm, disarm, estop, drive --v --w, teleop, top; --sim for the simulated board)"
 )]
 struct Cli {
     #[command(subcommand)]

@@ -300,3 +300,45 @@ fn teleop_drives_while_keys_come_and_q_stops_and_restores_the_terminal() {
     assert!(f(&t["v_mps"]).abs() < 0.01, "{t}");
     assert_eq!(r["after"]["mode"], "STOP", "{r}");
 }
+
+/// Ctrl-C during `drive` (SIGINT): the verb commands zero, waits for the wheels to stand, sends
+/// enable 0, and reports the run as interrupted; the simulated robot is left standing.
+#[test]
+fn drive_interrupted_by_sigint_stops_and_disarms() {
+    use nix::sys::signal::{kill, Signal};
+    use nix::unistd::Pid;
+    use std::process::Stdio;
+
+    let child = Command::new(env!("CARGO_BIN_EXE_motorlink"))
+        .args([
+            "drive",
+            "--sim",
+            "--sim-clock",
+            "paced",
+            "--v",
+            "0.3",
+            "--seconds",
+            "60",
+            "--json",
+        ])
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    std::thread::sleep(std::time::Duration::from_millis(1500));
+    kill(
+        Pid::from_raw(i32::try_from(child.id()).unwrap()),
+        Signal::SIGINT,
+    )
+    .unwrap();
+    let out = child.wait_with_output().unwrap();
+    let text = String::from_utf8_lossy(&out.stdout);
+    let r: Value = serde_json::from_str(text.trim())
+        .unwrap_or_else(|e| panic!("{e}: {text} {}", String::from_utf8_lossy(&out.stderr)));
+    assert_eq!(out.status.code(), Some(0), "{r}");
+    assert_eq!(r["interrupted"], true);
+    // Stopped long before the 60 s asked for.
+    assert!(f(&r["drive"]["seconds"]) < 59.0, "{r}");
+    assert_eq!(r["after"]["mode"], "STOP");
+    assert!(f(&r["sim_truth"]["v_mps"]).abs() < 0.01, "{r}");
+}

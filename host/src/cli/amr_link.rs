@@ -956,7 +956,12 @@ pub fn disarm<P: Port>(
     let mut never = || false;
     s.run(SETTLE_CYCLES, &mut never)?;
     let f = s.feedback().unwrap_or_default();
-    let (verdict, msg) = if stood {
+    let (verdict, msg) = if stood && f.mode == Mode::Brake as u32 {
+        (
+            Outcome::Done,
+            "the MCU is in BRAKE with the wheels standing: nothing to disarm".to_string(),
+        )
+    } else if stood {
         (
             Outcome::Done,
             format!(
