@@ -68,6 +68,19 @@ fn drive_forward_moves_the_robot_forward_and_ends_stopped() {
 }
 
 #[test]
+fn a_drive_longer_than_the_kept_history_still_counts_its_ramp_down() {
+    // 3 s at 0.6 m/s: 1.8 m less the ramp up, plus the ramp down (7.5 rad/s at the bridge's
+    // 0.04 rad/s per ms: 0.19 s, some 0.06 m). A session keeps 2 s of feedback, less than the
+    // run, so the ramp down must be taken from the newest samples to be counted.
+    let (code, r) = sim(&["drive", "--v", "0.6", "--seconds", "3"]);
+    assert_eq!(code, 0, "{r}");
+    let d = f(&r["drive"]["distance_m"]);
+    let x = f(&r["sim_truth"]["x_m"]);
+    assert!((d - x).abs() < 0.02, "feedback {d} m, robot {x} m");
+    assert!((1.6..1.9).contains(&x), "{x}");
+}
+
+#[test]
 fn drive_backward_turning_left_goes_backward_and_turns_left() {
     let (code, r) = sim(&["drive", "--v", "-0.2", "--w", "0.5", "--seconds", "1"]);
     assert_eq!(code, 0, "{r}");

@@ -1130,11 +1130,12 @@ pub fn drive<P: Port>(
         }
     }
     meter.summary.seconds = done as f64 * 1e-3;
-    // The ramp down counts in the distance too.
-    let ramp_from = s.history.len();
+    // The ramp down counts in the distance too: the samples that came during it.
+    let ok_before = s.counters.feedback_ok;
     s.stop_and_disarm(3_000)?;
-    let tail: Vec<Sample> = s.history.iter().copied().collect();
-    for smp in tail.iter().skip(ramp_from.min(tail.len())) {
+    let ramp = usize::try_from(s.counters.feedback_ok.saturating_sub(ok_before)).unwrap_or(0);
+    let tail: Vec<Sample> = s.history.iter().rev().take(ramp).copied().collect();
+    for smp in tail.iter().rev() {
         meter.add(&kin, smp.t_us, &smp.fb, false);
     }
     let (verdict, msg) = if latched {
