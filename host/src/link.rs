@@ -9,6 +9,19 @@ use crate::bridge::{Bridge, Diagnostic};
 use crate::pacing::Pacer;
 use crate::transport::{LinkError, Transport};
 
+/// One exchange as it happened on the wire: the host times and both frames.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct ExchangeRecord {
+    /// Host time the command was built and sent, µs.
+    pub t_send_us: u64,
+    /// Host time the feedback was in, µs.
+    pub t_recv_us: u64,
+    /// The command frame (MOSI).
+    pub tx: [u8; FRAME_LEN],
+    /// What came back in the feedback slot (MISO).
+    pub rx: [u8; FRAME_LEN],
+}
+
 /// The bridge bound to a transport and a pacer.
 pub struct Link<T: Transport> {
     /// The byte link.
@@ -20,6 +33,8 @@ pub struct Link<T: Transport> {
     epoch: Instant,
     /// Exchanges that failed at the transport level.
     pub transport_errors: u64,
+    /// The last exchange that completed (for recorders).
+    pub last_exchange: Option<ExchangeRecord>,
 }
 
 impl<T: Transport> Link<T> {
@@ -31,6 +46,7 @@ impl<T: Transport> Link<T> {
             pacer: Pacer::contract(),
             epoch: Instant::now(),
             transport_errors: 0,
+            last_exchange: None,
         }
     }
 
@@ -78,6 +94,12 @@ impl<T: Transport> Link<T> {
         let t_recv = t_recv.unwrap_or_else(|| self.now_us());
         match r {
             Ok(()) => {
+                self.last_exchange = Some(ExchangeRecord {
+                    t_send_us: t_send,
+                    t_recv_us: t_recv,
+                    tx,
+                    rx,
+                });
                 let frame = amr::decode_mcu_frame(&rx);
                 self.bridge.on_frame(t_send, t_recv, cmd.seq, frame);
                 Ok(self.bridge.drain())

@@ -583,6 +583,55 @@ enum Cmd {
         #[arg(long)]
         json: bool,
     },
+    /// Run the 1 kHz seed 000 bridge and record every exchange to MCAP (ROS 2) or CSV.
+    ///
+    /// The bridge sends cmd_vel (--v m/s, --w rad/s) in every exchange for --seconds (2000
+    /// exchanges for 2 s), armed at the start if either is not 0 (else the drive stays disabled
+    /// and the MCU's reports are recorded). --sim: the simulated board (the board application and
+    /// a robot plant) in lockstep, one board millisecond per exchange, so the file is the same on
+    /// every run. A device: /dev/spidevB.C at --speed Hz, paced at 1 kHz on wall time; afterwards
+    /// 50 disarmed exchanges (not recorded) let the board ramp down before the silence brakes it.
+    ///
+    /// FILE.mcap (profile ros2, message encoding cdr, schema encoding ros2msg, uncompressed), one
+    /// message per exchange on /cmd_vel (geometry_msgs/msg/Twist), /odom (nav_msgs/msg/Odometry:
+    /// pose integrated from the encoders, twist from the measured wheel speeds; frames odom and
+    /// base_link) and /joint_states (sensor_msgs/msg/JointState: wheel angle, speed, motor current
+    /// in A as effort) for each valid feedback, /motorlink/frames (JSON, no schema: index,
+    /// t_send_us, t_recv_us, tx and rx in hex); and every 100 exchanges /diagnostics
+    /// (diagnostic_msgs/msg/DiagnosticArray: "motorlink: mcu" mode, fault flags by name, feedback
+    /// age, sequence numbers; "motorlink: link" arming state and the bridge's diagnostics since the
+    /// last one; "motorlink: clock" sync and offset). Times: the host time the feedback came in
+    /// (UNIX time on a device; the board's clock from 0 in --sim).
+    ///
+    /// FILE.csv: a header line, then one row per exchange (command, feedback, mode and faults by
+    /// name, odometry, arming state, clock sync, diagnostics; in --sim also the plant's truth).
+    ///
+    /// Last line on stdout: {"out":..,"exchanges":..,"feedback":..,"diagnostics":..}. Ctrl-C
+    /// (SIGINT, SIGTERM, SIGHUP) ends the recording early with a complete file. Exit 2 on a bad
+    /// argument (checked before the device is opened) or a failed exchange (the file is completed
+    /// up to it).
+    Record {
+        /// spidev device of the AMR link (/dev/spidevB.C); none with --sim.
+        device: Option<String>,
+        /// Output file: .mcap or .csv.
+        #[arg(long, value_name = "FILE")]
+        out: PathBuf,
+        /// Record against the simulated board (lockstep, deterministic) instead of a device.
+        #[arg(long)]
+        sim: bool,
+        /// SPI clock, Hz.
+        #[arg(long, default_value_t = 2_000_000)]
+        speed: u32,
+        /// How long, s (1000 exchanges per second).
+        #[arg(long, default_value_t = 10.0, allow_negative_numbers = true)]
+        seconds: f64,
+        /// cmd_vel forward speed, m/s.
+        #[arg(long = "v", default_value_t = 0.0, allow_negative_numbers = true)]
+        v: f64,
+        /// cmd_vel yaw rate, rad/s.
+        #[arg(long = "w", default_value_t = 0.0, allow_negative_numbers = true)]
+        w: f64,
+    },
     /// Measure the 1 kHz loop's period and deadline misses on this machine (no device needed).
     LoopBench {
         /// How long, s.
@@ -850,6 +899,60 @@ fn monitor_other(
     }
     eprintln!("loop: {}", link.pacer.stats.summary());
     Ok(())
+}
+
+/// `record`: checks every argument before the device is opened.
+fn record(
+    device: Option<&str>,
+    out: &Path,
+    sim: bool,
+    speed: u32,
+    seconds: f64,
+    (v, w): (f64, f64),
+) -> Result<u8, String> {
+    use motorlink::record::{self, Format, RecordConfig, RecordPlan};
+    let plan = RecordPlan::new(seconds, v, w).map_err(|e| e.to_string())?;
+    Format::from_path(out).map_err(|e| e.to_string())?;
+    let summary = match (sim, device) {
+        (true, None) => {
+            let mut signals = pi::Signals::block()?;
+            record::record_sim(out, &plan, RecordConfig::default(), &mut || {
+                signals.received()
+            })
+        }
+        (false, Some(dev)) => {
+            let mut signals = pi::Signals::block()?;
+            let t = open_spi(dev, speed)?;
+            let mut link = Link::new(Boxed(t), Bridge::new(BridgeConfig::DEFAULT));
+            let origin = std::time::SystemTime::now()
+                .duration_since(std::time::UNIX_EPOCH)
+                .map_or(0, |d| u64::try_from(d.as_nanos()).unwrap_or(u64::MAX));
+            let cfg = RecordConfig {
+                time_origin_ns: origin,
+                ..RecordConfig::default()
+            };
+            record::record_link(&mut link, out, &plan, cfg, &mut || signals.received())
+        }
+        (true, Some(d)) => {
+            return Err(format!(
+                "record: give a device or --sim, not both (got {d} and --sim)"
+            ))
+        }
+        (false, None) => {
+            return Err("record: give the AMR link's device (/dev/spidevB.C) or --sim".into())
+        }
+    }
+    .map_err(|e| e.to_string())?;
+    out!(
+        "{}",
+        serde_json::json!({
+            "out": out.display().to_string(),
+            "exchanges": summary.exchanges,
+            "feedback": summary.feedback,
+            "diagnostics": summary.diagnostics,
+        })
+    );
+    Ok(0)
 }
 
 /// What `ping` was asked.
@@ -1345,6 +1448,15 @@ fn main() -> ExitCode {
         )
         .map(|()| 0),
         Cmd::LoopBench { seconds } => loop_bench(seconds).map(|()| 0),
+        Cmd::Record {
+            device,
+            out,
+            sim,
+            speed,
+            seconds,
+            v,
+            w,
+        } => record(device.as_deref(), &out, sim, speed, seconds, (v, w)),
         verb => board_verb(verb),
     };
     match r {

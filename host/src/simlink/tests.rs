@@ -254,6 +254,19 @@ fn wall_clock_silence_brakes_the_board() {
 }
 
 #[test]
+fn the_paced_link_runs_the_board_on_wall_time() {
+    let mut l = Link::new(SimMcu::wall(), Bridge::new(BridgeConfig::DEFAULT));
+    for _ in 0..20 {
+        l.cycle().unwrap();
+    }
+    // Every feedback decoded; 20 cycles on 1 ms deadlines span at least 19 ms of wall time, and
+    // the board caught up with the wall before each exchange.
+    assert_eq!(l.bridge.stats.feedback_ok, 20);
+    assert_eq!(l.bridge.stats.feedback_rejected, 0);
+    assert!(l.transport.now_us() >= 19_000, "{}", l.transport.now_us());
+}
+
+#[test]
 fn frames_of_the_wrong_length_are_refused() {
     let mut sim = SimMcu::lockstep();
     let mut rx = [0u8; FRAME_LEN];
