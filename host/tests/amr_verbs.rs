@@ -355,3 +355,80 @@ fn drive_interrupted_by_sigint_stops_and_disarms() {
     assert_eq!(r["after"]["mode"], "STOP");
     assert!(f(&r["sim_truth"]["v_mps"]).abs() < 0.01, "{r}");
 }
+
+/// `top` on a pseudo-terminal against the simulated board with its ESTOP input held: the view
+/// shows the mode, the fault names and the link counters while it runs, and the terminal is given
+/// back before the report is printed.
+#[test]
+fn top_on_a_terminal_shows_the_board_and_gives_the_terminal_back() {
+    use std::io::Read;
+    use std::process::Stdio;
+
+    let size = nix::pty::Winsize {
+        ws_row: 32,
+        ws_col: 120,
+        ws_xpixel: 0,
+        ws_ypixel: 0,
+    };
+    let pty = nix::pty::openpty(Some(&size), None).unwrap();
+    let child = Command::new(env!("CARGO_BIN_EXE_motorlink"))
+        .args([
+            "top",
+            "--sim",
+            "--sim-clock",
+            "paced",
+            "--sim-setup",
+            "estop-held",
+            "--seconds",
+            "1",
+            "--json",
+        ])
+        .stdin(Stdio::from(pty.slave.try_clone().unwrap()))
+        .stdout(Stdio::from(pty.slave.try_clone().unwrap()))
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    drop(pty.slave);
+    let mut reader = std::fs::File::from(pty.master);
+    let screen = std::thread::spawn(move || {
+        let mut all = Vec::new();
+        let mut buf = [0u8; 65536];
+        while let Ok(n) = reader.read(&mut buf) {
+            if n == 0 {
+                break;
+            }
+            all.extend_from_slice(&buf[..n]);
+        }
+        all
+    });
+    let out = child.wait_with_output().unwrap();
+    let screen = String::from_utf8_lossy(&screen.join().unwrap()).into_owned();
+    assert_eq!(
+        out.status.code(),
+        Some(0),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let restored = screen
+        .rfind("\u{1b}[?1049l")
+        .expect("the alternate screen was left");
+    // Words, not phrases: the first frame skips the blank cells between them (cursor moves).
+    let drawn = &screen[..restored];
+    for word in [
+        "motorlink",
+        "top:",
+        "BRAKE",
+        "ESTOP",
+        "BRAKE_LATCHED",
+        "exchanges",
+        "diagnostics",
+    ] {
+        assert!(drawn.contains(word), "{word} not drawn");
+    }
+    let report = &screen[restored..];
+    let r: Value = serde_json::from_str(report[report.find('{').unwrap()..].trim()).unwrap();
+    assert_eq!(r["verb"], "top");
+    // It watched: the board never left BRAKE, and no frame armed it.
+    assert_eq!(r["modes_seen"], serde_json::json!(["BRAKE"]));
+    assert!(f(&r["counters"]["exchanges"]) >= 1000.0, "{r}");
+}
