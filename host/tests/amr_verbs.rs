@@ -186,6 +186,12 @@ fn bad_twists_and_mixed_options_are_refused_before_anything_is_sent() {
     let (code, _, err) = motorlink(&["drive", "--sim"]);
     assert_eq!(code, 2);
     assert!(err.contains("--v"), "{err}");
+    let (code, _, err) = motorlink(&["top", "--sim", "--sim-clock", "lockstep"]);
+    assert_eq!(code, 2);
+    assert!(err.contains("real time"), "{err}");
+    let (code, _, err) = motorlink(&["teleop", "--sim", "--max-v", "3"]);
+    assert_eq!(code, 2);
+    assert!(err.contains("--max-v"), "{err}");
 }
 
 #[test]

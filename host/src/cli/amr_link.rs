@@ -48,11 +48,11 @@ pub struct AmrOpts {
     /// device: no hardware needed. It starts as a board does, BRAKE latched after power-on.
     #[arg(long)]
     pub sim: bool,
-    /// The simulated board's clock: wall (its ticks follow real time: a host thread starved for
-    /// 10 ms brakes it, as it would a real board), paced (one board millisecond per exchange, the
-    /// exchanges paced at 1 kHz: real time, immune to a loaded machine's scheduling), lockstep
-    /// (one board millisecond per exchange, as fast as possible: deterministic, for tests).
-    #[arg(long, value_enum, default_value = "wall")]
+    /// The simulated board's clock: paced (one board millisecond per exchange, the exchanges at
+    /// 1 kHz: real time, immune to a loaded machine's scheduling), wall (its ticks follow real
+    /// time: a host thread starved for 10 ms brakes it, as it would a real board), lockstep (one
+    /// board millisecond per exchange, as fast as possible: deterministic, for tests).
+    #[arg(long, value_enum, default_value = "paced")]
     pub sim_clock: SimClockArg,
     /// What the simulated board has been through before the verb starts (for tests): power-on,
     /// driving (armed, 0.3 m/s), estop-held (its ESTOP input pressed and held), braked (driven,
@@ -82,9 +82,9 @@ pub struct AmrLinkArgs {
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, ValueEnum)]
 pub enum SimClockArg {
     /// The board's ticks follow wall time.
-    #[default]
     Wall,
     /// One board millisecond per exchange, exchanges at 1 kHz on the wall clock.
+    #[default]
     Paced,
     /// One board millisecond per exchange: deterministic.
     Lockstep,
@@ -353,6 +353,8 @@ pub struct LinkCounters {
     pub gaps: u64,
     /// Diagnostics raised, by name.
     pub diagnostics: BTreeMap<&'static str, u64>,
+    /// The longest gap between two of the host's own cycles that was reported late, µs.
+    pub host_late_max_us: u64,
 }
 
 /// The bridge bound to a port: one exchange per [`Session::cycle`].
@@ -452,6 +454,9 @@ impl<P: Port> Session<P> {
             }
         }
         for (t, d) in self.bridge.drain() {
+            if let Diagnostic::HostLate { gap_us } = d {
+                self.counters.host_late_max_us = self.counters.host_late_max_us.max(gap_us);
+            }
             let c = self.counters.diagnostics.entry(d.name()).or_insert(0);
             *c = c.saturating_add(1);
             while self.recent.len() >= RECENT {
@@ -835,6 +840,28 @@ pub fn brake_hint(flags: u32) -> String {
     }
 }
 
+/// Why the link may have lapsed: this host's own late cycles, if any.
+fn late_hint<P: Port>(s: &Session<P>) -> String {
+    let late = s
+        .counters
+        .diagnostics
+        .get("host_late")
+        .copied()
+        .unwrap_or(0);
+    if late == 0 {
+        return String::new();
+    }
+    format!(
+        "; this host was late {late} time(s) (the longest gap {:.1} ms; the board brakes 10 ms after a frame): a loaded machine or no real-time priority{}",
+        s.counters.host_late_max_us as f64 * 1e-3,
+        if s.port.name() == "sim" {
+            " (with --sim, --sim-clock paced is immune to it)"
+        } else {
+            ""
+        }
+    )
+}
+
 /// Receives a first feedback (enable 0 frames, at most `ms`): what the MCU shows before the verb
 /// acts.
 fn first_feedback<P: Port>(
@@ -1143,9 +1170,10 @@ pub fn drive<P: Port>(
         (
             Outcome::Refused,
             format!(
-                "the MCU braked while driving (faults {}): {}",
+                "the MCU braked while driving (faults {}): {}{}",
                 fault_names(flags).join(","),
-                brake_hint(flags)
+                brake_hint(flags),
+                late_hint(s)
             ),
         )
     } else {
@@ -1433,7 +1461,7 @@ pub fn exec_tui(
     let verb = if teleop.is_some() { "teleop" } else { "top" };
     if opts.sim && opts.sim_clock == SimClockArg::Lockstep {
         return Err(format!(
-            "{verb} runs on the wall clock: drop --sim-clock lockstep"
+            "{verb} runs in real time: use --sim-clock paced (the default) or wall"
         ));
     }
     if let Some(sec) = seconds {

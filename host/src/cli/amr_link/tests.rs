@@ -274,3 +274,24 @@ fn fault_names_follow_the_bits() {
     assert_eq!(mode_name(4), "BRAKE");
     assert_eq!(mode_name(9), "UNKNOWN");
 }
+
+#[test]
+fn a_late_host_is_counted_and_named_in_the_hint() {
+    let mut s = Session::new(LadderPort::new());
+    let mut stop = never();
+    s.run(10, &mut stop).unwrap();
+    assert_eq!(late_hint(&s), "");
+    // The host's clock jumps 5 ms between two cycles (the board, here, does not notice).
+    s.port.now += 5000;
+    s.run(2, &mut stop).unwrap();
+    assert_eq!(s.counters.diagnostics.get("host_late"), Some(&1));
+    // 1 ms of the usual period plus the 5 ms jump.
+    assert_eq!(s.counters.host_late_max_us, 6000);
+    let hint = late_hint(&s);
+    assert!(hint.contains("late 1 time(s)"), "{hint}");
+    assert!(hint.contains("6.0 ms"), "{hint}");
+    assert!(
+        !hint.contains("--sim-clock"),
+        "not a simulated port: {hint}"
+    );
+}
