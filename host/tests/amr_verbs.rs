@@ -272,18 +272,27 @@ fn teleop_drives_while_keys_come_and_q_stops_and_restores_the_terminal() {
     let mut master = std::fs::File::from(pty.master);
     let mut reader = master.try_clone().unwrap();
     // The screen: read until the child closes the terminal (EIO on the master).
+    let shared = std::sync::Arc::new(std::sync::Mutex::new(Vec::new()));
+    let sink = std::sync::Arc::clone(&shared);
     let screen = std::thread::spawn(move || {
-        let mut all = Vec::new();
         let mut buf = [0u8; 65536];
         while let Ok(n) = reader.read(&mut buf) {
             if n == 0 {
                 break;
             }
-            all.extend_from_slice(&buf[..n]);
+            sink.lock().unwrap().extend_from_slice(&buf[..n]);
         }
-        all
     });
-    std::thread::sleep(Duration::from_millis(1500));
+    // Keys only once the view says the drive is armed (the help line's note), however slow the
+    // start on a loaded machine; a minute at most.
+    let drawn = |word: &str| String::from_utf8_lossy(&shared.lock().unwrap()).contains(word);
+    for _ in 0..600 {
+        if drawn("armed") {
+            break;
+        }
+        std::thread::sleep(Duration::from_millis(100));
+    }
+    assert!(drawn("armed"), "teleop never showed the drive armed");
     // Two taps, then the key held (a terminal repeats it every 40 ms) for 1.5 s.
     for _ in 0..2 {
         master.write_all(b"w").unwrap();
@@ -296,7 +305,8 @@ fn teleop_drives_while_keys_come_and_q_stops_and_restores_the_terminal() {
     master.write_all(b"q").unwrap();
     let out = child.wait_with_output().unwrap();
     drop(master);
-    let screen = String::from_utf8_lossy(&screen.join().unwrap()).into_owned();
+    screen.join().unwrap();
+    let screen = String::from_utf8_lossy(&shared.lock().unwrap()).into_owned();
     assert_eq!(
         out.status.code(),
         Some(0),
