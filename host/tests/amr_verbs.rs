@@ -65,6 +65,9 @@ fn drive_forward_moves_the_robot_forward_and_ends_stopped() {
     assert_eq!(r["after"]["mode"], "STOP");
     assert!(f(&t["v_mps"]).abs() < 0.01, "{t}");
     assert_eq!(r["before"]["mode"], "BRAKE");
+    // The identity asked on the first frame: the simulated board runs the AMR-SPI profile.
+    assert_eq!(r["mcu_info"]["board"], "amr_spi", "{r}");
+    assert_eq!(r["mcu_info"]["reset_cause"], "power_on");
 }
 
 #[test]
@@ -217,6 +220,7 @@ fn text_output_names_mode_and_verdict() {
     assert!(out.starts_with("rearm: done (sim)"), "{out}");
     assert!(out.contains("mode BRAKE"), "{out}");
     assert!(out.contains("POWER_ON"), "{out}");
+    assert!(out.contains("board AmrSpi, reset cause PowerOn"), "{out}");
 }
 
 #[test]

@@ -24,7 +24,7 @@ use std::collections::BTreeMap;
 use std::time::{Duration, Instant};
 
 use clap::{Args, ValueEnum};
-use protocol::amr::{self, MotorFeedback, FRAME_LEN};
+use protocol::amr::{self, McuInfo, MotorFeedback, FRAME_LEN};
 use serde::Serialize;
 use serde_json::Value;
 use statemachine::{FaultFlags, Mode};
@@ -599,6 +599,8 @@ pub struct Report {
     pub interrupted: bool,
     /// The simulated board's ground truth at the end (`--sim`).
     pub sim_truth: Option<Value>,
+    /// The MCU's identity (firmware version, board, reset cause), asked on the first frame.
+    pub mcu_info: Option<McuInfo>,
 }
 
 impl Report {
@@ -623,6 +625,7 @@ impl Report {
             pacing: s.port.pacing().map(pacing_json),
             interrupted: false,
             sim_truth: s.port.truth(),
+            mcu_info: s.bridge.mcu_info(),
         }
     }
 
@@ -678,6 +681,13 @@ impl Report {
                 .map(|(k, v)| format!("{k} x{v}"))
                 .collect();
             t.push_str(&format!("  diags   {}\n", d.join(", ")));
+        }
+        if let Some(i) = &self.mcu_info {
+            let (ma, mi, pa) = i.fw_version_parts();
+            t.push_str(&format!(
+                "  mcu     firmware {ma}.{mi}.{pa}, board {:?}, reset cause {:?}, {} resets\n",
+                i.board, i.reset_cause, i.reset_count
+            ));
         }
         if self.interrupted {
             t.push_str("  interrupted (Ctrl-C): stopped and disarmed\n");
