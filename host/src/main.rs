@@ -1169,6 +1169,9 @@ fn board_verb(cmd: Cmd) -> Result<u8, String> {
                 if pwm.is_some() || enable || hz.is_some() {
                     return Err("--pwm, --enable and --hz are the serial drive's; the AMR link takes --v and --w; nothing was sent".into());
                 }
+                if let Some(flag) = pi.first_given().filter(|f| *f != "--speed") {
+                    return Err(format!("{flag} is an option of drive --kind pi-spi; the AMR link takes --v and --w; nothing was sent"));
+                }
                 if amr_v.is_none() && amr_w.is_none() {
                     return Err(
                         "drive on the AMR link needs --v (m/s) and/or --w (rad/s), e.g. --v 0.3"

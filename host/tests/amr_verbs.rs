@@ -186,6 +186,12 @@ fn bad_twists_and_mixed_options_are_refused_before_anything_is_sent() {
     let (code, _, err) = motorlink(&["drive", "--sim", "--v", "0.3", "--pwm", "1,1,1,1"]);
     assert_eq!(code, 2);
     assert!(err.contains("--pwm"), "{err}");
+    let (code, _, err) = motorlink(&["drive", "--sim", "--v", "0.3", "--modes", "pwm"]);
+    assert_eq!(code, 2);
+    assert!(
+        err.contains("--modes is an option of drive --kind pi-spi"),
+        "{err}"
+    );
     let (code, _, err) = motorlink(&["drive", "--sim"]);
     assert_eq!(code, 2);
     assert!(err.contains("--v"), "{err}");
