@@ -247,101 +247,151 @@ fn help_documents_the_amr_verbs() {
     }
 }
 
-/// `teleop` on a pseudo-terminal (the test is its keyboard and screen), on the paced simulated
-/// board: keys tapped and then held drive the robot forward, `q` stops it, and the terminal is
-/// given back (the alternate screen left, the cursor shown) before the report is printed.
+/// `motorlink` on a pseudo-terminal of 32 x 120 (the test is its keyboard and screen).
+struct OnPty {
+    child: std::process::Child,
+    keyboard: std::fs::File,
+    screen: std::sync::Arc<std::sync::Mutex<Vec<u8>>>,
+    reader: std::thread::JoinHandle<()>,
+}
+
+impl OnPty {
+    fn start(args: &[&str]) -> Self {
+        use std::io::Read;
+        use std::process::Stdio;
+        let size = nix::pty::Winsize {
+            ws_row: 32,
+            ws_col: 120,
+            ws_xpixel: 0,
+            ws_ypixel: 0,
+        };
+        let pty = nix::pty::openpty(Some(&size), None).unwrap();
+        let child = Command::new(env!("CARGO_BIN_EXE_motorlink"))
+            .args(args)
+            .stdin(Stdio::from(pty.slave.try_clone().unwrap()))
+            .stdout(Stdio::from(pty.slave.try_clone().unwrap()))
+            .stderr(Stdio::piped())
+            .spawn()
+            .unwrap();
+        drop(pty.slave);
+        let keyboard = std::fs::File::from(pty.master);
+        let mut from = keyboard.try_clone().unwrap();
+        let screen = std::sync::Arc::new(std::sync::Mutex::new(Vec::new()));
+        let sink = std::sync::Arc::clone(&screen);
+        // Read until the child closes the terminal (EIO on the master).
+        let reader = std::thread::spawn(move || {
+            let mut buf = [0u8; 65536];
+            while let Ok(n) = from.read(&mut buf) {
+                if n == 0 {
+                    break;
+                }
+                sink.lock().unwrap().extend_from_slice(&buf[..n]);
+            }
+        });
+        Self {
+            child,
+            keyboard,
+            screen,
+            reader,
+        }
+    }
+
+    fn shows(&self, word: &str) -> bool {
+        String::from_utf8_lossy(&self.screen.lock().unwrap()).contains(word)
+    }
+
+    /// Waits (a minute at most) until the screen shows `word`, however slow the start.
+    fn wait_for(&self, word: &str) {
+        for _ in 0..600 {
+            if self.shows(word) {
+                return;
+            }
+            std::thread::sleep(std::time::Duration::from_millis(100));
+        }
+        panic!("the screen never showed {word}");
+    }
+
+    fn keys(&mut self, keys: &[u8], every_ms: u64) {
+        use std::io::Write;
+        for k in keys {
+            self.keyboard.write_all(&[*k]).unwrap();
+            std::thread::sleep(std::time::Duration::from_millis(every_ms));
+        }
+    }
+
+    /// Waits for the exit: the screen while it ran, and the report printed after the terminal was
+    /// given back (the alternate screen left and the cursor shown, or the test fails).
+    fn finish(self) -> (String, Value) {
+        let out = self.child.wait_with_output().unwrap();
+        drop(self.keyboard);
+        self.reader.join().unwrap();
+        let screen = String::from_utf8_lossy(&self.screen.lock().unwrap()).into_owned();
+        assert_eq!(
+            out.status.code(),
+            Some(0),
+            "{}",
+            String::from_utf8_lossy(&out.stderr)
+        );
+        let restored = screen
+            .rfind("\u{1b}[?1049l")
+            .expect("the alternate screen was left");
+        let report = &screen[restored..];
+        assert!(report.contains("\u{1b}[?25h"), "the cursor is shown again");
+        let r: Value = serde_json::from_str(report[report.find('{').unwrap()..].trim()).unwrap();
+        (screen[..restored].to_string(), r)
+    }
+}
+
+/// `teleop` on the paced simulated board: keys tapped and then held drive the robot forward, `q`
+/// stops it, and the terminal is given back before the report is printed.
 #[test]
 fn teleop_drives_while_keys_come_and_q_stops_and_restores_the_terminal() {
-    use std::io::{Read, Write};
-    use std::process::Stdio;
-    use std::time::Duration;
-
-    let size = nix::pty::Winsize {
-        ws_row: 32,
-        ws_col: 120,
-        ws_xpixel: 0,
-        ws_ypixel: 0,
-    };
-    let pty = nix::pty::openpty(Some(&size), None).unwrap();
-    let child = Command::new(env!("CARGO_BIN_EXE_motorlink"))
-        .args([
-            "teleop",
-            "--sim",
-            "--sim-clock",
-            "paced",
-            "--json",
-            "--seconds",
-            "60",
-        ])
-        .stdin(Stdio::from(pty.slave.try_clone().unwrap()))
-        .stdout(Stdio::from(pty.slave.try_clone().unwrap()))
-        .stderr(Stdio::piped())
-        .spawn()
-        .unwrap();
-    drop(pty.slave);
-    let mut master = std::fs::File::from(pty.master);
-    let mut reader = master.try_clone().unwrap();
-    // The screen: read until the child closes the terminal (EIO on the master).
-    let shared = std::sync::Arc::new(std::sync::Mutex::new(Vec::new()));
-    let sink = std::sync::Arc::clone(&shared);
-    let screen = std::thread::spawn(move || {
-        let mut buf = [0u8; 65536];
-        while let Ok(n) = reader.read(&mut buf) {
-            if n == 0 {
-                break;
-            }
-            sink.lock().unwrap().extend_from_slice(&buf[..n]);
-        }
-    });
-    // Keys only once the view says the drive is armed (the help line's note), however slow the
-    // start on a loaded machine; a minute at most.
-    let drawn = |word: &str| String::from_utf8_lossy(&shared.lock().unwrap()).contains(word);
-    for _ in 0..600 {
-        if drawn("armed") {
-            break;
-        }
-        std::thread::sleep(Duration::from_millis(100));
-    }
-    assert!(drawn("armed"), "teleop never showed the drive armed");
-    // Two taps, then the key held (a terminal repeats it every 40 ms) for 1.5 s.
-    for _ in 0..2 {
-        master.write_all(b"w").unwrap();
-        std::thread::sleep(Duration::from_millis(250));
-    }
-    for _ in 0..38 {
-        master.write_all(b"w").unwrap();
-        std::thread::sleep(Duration::from_millis(40));
-    }
-    master.write_all(b"q").unwrap();
-    let out = child.wait_with_output().unwrap();
-    drop(master);
-    screen.join().unwrap();
-    let screen = String::from_utf8_lossy(&shared.lock().unwrap()).into_owned();
-    assert_eq!(
-        out.status.code(),
-        Some(0),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
-    let restored = screen
-        .rfind("\u{1b}[?1049l")
-        .expect("the alternate screen was left");
-    let report = &screen[restored..];
-    assert!(report.contains("\u{1b}[?25h"), "the cursor is shown again");
-    let json = &report[report.find('{').unwrap()..];
-    let r: Value = serde_json::from_str(json.trim()).unwrap();
+    let mut t = OnPty::start(&["teleop", "--sim", "--json", "--seconds", "60"]);
+    // Keys only once the view says the drive is armed (the help line's note).
+    t.wait_for("armed");
+    // Two taps, then the key held (a terminal repeats it every 40 ms) for 1.5 s, then q.
+    t.keys(b"ww", 250);
+    t.keys(&[b'w'; 38], 40);
+    t.keys(b"q", 0);
+    let (drawn, r) = t.finish();
     assert_eq!(r["verb"], "teleop");
     // Drawn while it ran: the view's mode line.
-    assert!(screen[..restored].contains("mode "), "nothing drawn");
+    assert!(drawn.contains("mode"), "nothing drawn");
     // It moved forward (0.1 m/s or more for over a second), and q left it standing, disarmed.
     let t = &r["sim_truth"];
     assert!(f(&t["x_m"]) > 0.05, "{t}");
     assert!(f(&t["v_mps"]).abs() < 0.01, "{t}");
     assert_eq!(r["after"]["mode"], "STOP", "{r}");
+    assert_eq!(r["interrupted"], false);
 }
 
-/// Ctrl-C during `drive` (SIGINT): the verb commands zero, waits for the wheels to stand, sends
-/// enable 0, and reports the run as interrupted; the simulated robot is left standing.
+/// A terminal that goes quiet: the twist stops being sent, the bridge's staleness rule takes the
+/// target to zero while teleop still runs, and the robot stands before teleop ends on its own.
+#[test]
+fn teleop_with_a_quiet_keyboard_lets_the_command_go_stale() {
+    let mut t = OnPty::start(&["teleop", "--sim", "--json", "--seconds", "4"]);
+    t.wait_for("armed");
+    t.keys(b"www", 150);
+    // No key after these: 0.75 s of hold and 0.2 s of staleness are long gone by the end.
+    let (drawn, r) = t.finish();
+    // The command line said the twist was being sent (SENDING), and later, while teleop still
+    // ran, that it no longer was (IDLE).
+    let sent = drawn
+        .rfind("SENDING")
+        .expect("the twist was never shown as sent");
+    assert!(
+        drawn[sent..].contains("IDLE"),
+        "never shown as no longer sent"
+    );
+    assert!(
+        f(&r["counters"]["diagnostics"]["cmd_vel_stale"]) >= 1.0,
+        "{r}"
+    );
+    let t = &r["sim_truth"];
+    assert!(f(&t["x_m"]) > 0.02, "it moved: {t}");
+    assert!(f(&t["v_mps"]).abs() < 0.01, "{t}");
+}
+
 #[test]
 fn drive_interrupted_by_sigint_stops_and_disarms() {
     use nix::sys::signal::{kill, Signal};
@@ -387,59 +437,17 @@ fn drive_interrupted_by_sigint_stops_and_disarms() {
 /// back before the report is printed.
 #[test]
 fn top_on_a_terminal_shows_the_board_and_gives_the_terminal_back() {
-    use std::io::Read;
-    use std::process::Stdio;
-
-    let size = nix::pty::Winsize {
-        ws_row: 32,
-        ws_col: 120,
-        ws_xpixel: 0,
-        ws_ypixel: 0,
-    };
-    let pty = nix::pty::openpty(Some(&size), None).unwrap();
-    let child = Command::new(env!("CARGO_BIN_EXE_motorlink"))
-        .args([
-            "top",
-            "--sim",
-            "--sim-clock",
-            "paced",
-            "--sim-setup",
-            "estop-held",
-            "--seconds",
-            "1",
-            "--json",
-        ])
-        .stdin(Stdio::from(pty.slave.try_clone().unwrap()))
-        .stdout(Stdio::from(pty.slave.try_clone().unwrap()))
-        .stderr(Stdio::piped())
-        .spawn()
-        .unwrap();
-    drop(pty.slave);
-    let mut reader = std::fs::File::from(pty.master);
-    let screen = std::thread::spawn(move || {
-        let mut all = Vec::new();
-        let mut buf = [0u8; 65536];
-        while let Ok(n) = reader.read(&mut buf) {
-            if n == 0 {
-                break;
-            }
-            all.extend_from_slice(&buf[..n]);
-        }
-        all
-    });
-    let out = child.wait_with_output().unwrap();
-    let screen = String::from_utf8_lossy(&screen.join().unwrap()).into_owned();
-    assert_eq!(
-        out.status.code(),
-        Some(0),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
-    let restored = screen
-        .rfind("\u{1b}[?1049l")
-        .expect("the alternate screen was left");
+    let t = OnPty::start(&[
+        "top",
+        "--sim",
+        "--sim-setup",
+        "estop-held",
+        "--seconds",
+        "1",
+        "--json",
+    ]);
+    let (drawn, r) = t.finish();
     // Words, not phrases: the first frame skips the blank cells between them (cursor moves).
-    let drawn = &screen[..restored];
     for word in [
         "motorlink",
         "top:",
@@ -451,8 +459,6 @@ fn top_on_a_terminal_shows_the_board_and_gives_the_terminal_back() {
     ] {
         assert!(drawn.contains(word), "{word} not drawn");
     }
-    let report = &screen[restored..];
-    let r: Value = serde_json::from_str(report[report.find('{').unwrap()..].trim()).unwrap();
     assert_eq!(r["verb"], "top");
     // It watched: the board never left BRAKE, and no frame armed it.
     assert_eq!(r["modes_seen"], serde_json::json!(["BRAKE"]));

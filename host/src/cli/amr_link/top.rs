@@ -235,9 +235,9 @@ fn status(v: &View) -> Paragraph<'_> {
         lines.push(Line::from(format!(
             "command v {cv:+.2} m/s  w {cw:+.2} rad/s  {}",
             if live {
-                "sent (keys recent)"
+                "SENDING (a key came within the hold time)"
             } else {
-                "not sent: no key recently, the bridge ramps to zero"
+                "IDLE: no key recently, nothing sent; the bridge ramps to zero"
             }
         )));
     }
@@ -590,7 +590,7 @@ mod tests {
         assert!(has(&l, "feedback age 1.5 ms"));
         assert!(has(&l, "synced, offset -1234 us, skew +12.5 ppm"), "{l:#?}");
         assert!(has(&l, "L   +1.25  R   -2.50 rad/s"), "{l:#?}");
-        assert!(has(&l, "command v +0.25 m/s  w -0.50 rad/s  sent"));
+        assert!(has(&l, "command v +0.25 m/s  w -0.50 rad/s  SENDING"));
         assert!(has(&l, "brake_latched ESTOP,BRAKE_LATCHED"));
         assert!(has(&l, "wheel speed, rad/s"));
         assert!(has(&l, "q quit"));
