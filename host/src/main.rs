@@ -302,7 +302,8 @@ enum Cmd {
         #[command(flatten)]
         amr: AmrOpts,
     },
-    /// Seed 001: send SET_MOTOR_PWM at a fixed rate for a while, then stop sending.
+    /// Seed 001: send SET_MOTOR_PWM at a fixed rate for a while, then stop sending. AMR link
+    /// (--kind spi, --sim): drive a twist (--v, --w).
     ///
     /// Frames go out on absolute deadlines (--hz; the first at once) for --seconds; every STATUS,
     /// IMU and ACK received is printed. Then nothing more is sent: the board brakes on its own
@@ -374,9 +375,12 @@ enum Cmd {
         #[command(flatten)]
         amr: AmrOpts,
     },
-    /// List serial ports (USB VID:PID, product, serial number) and spidev devices, with the link
-    /// kinds (--kind) each can serve. --json: {"devices":[{"path","bus","vid","pid",
-    /// "manufacturer","product","serial_number","kinds":[..],"note"}]}.
+    /// List serial ports and spidev devices, with the link kinds (--kind) each can serve.
+    ///
+    /// Serial ports come from the serialport crate's enumeration (sysfs: USB VID:PID,
+    /// manufacturer, product, serial number), spidev devices from /dev/spidev*. --json:
+    /// {"devices":[{"path","bus","vid","pid","manufacturer","product","serial_number",
+    /// "kinds":[..],"note"}]}.
     List {
         /// Print JSON instead of text.
         #[arg(long)]
