@@ -915,8 +915,13 @@ pub fn arm<P: Port>(
     let (verdict, msg) = match result {
         ArmResult::Armed => {
             let mode = s.feedback().map_or("?", |f| mode_name(f.mode));
+            let what = if b.mode == Mode::Brake as u32 {
+                "left BRAKE"
+            } else {
+                "armed"
+            };
             (Outcome::Done, format!(
-                "the MCU left BRAKE ({} -> {mode}) after the re-arm edge and fresh frames; it stays armed only while frames keep coming: this verb now commands zero and enable 0 (STOP), and the board brakes (COMM_LOST) 10 ms after its last frame",
+                "the MCU {what} ({} -> {mode}) after the re-arm edge and fresh frames; it stays armed only while frames keep coming: this verb now commands zero and enable 0 (STOP), and the board brakes (COMM_LOST) 10 ms after its last frame",
                 mode_name(b.mode)
             ))
         }

@@ -295,3 +295,16 @@ fn a_late_host_is_counted_and_named_in_the_hint() {
         "not a simulated port: {hint}"
     );
 }
+
+#[test]
+fn arm_from_stop_says_armed_not_left_brake() {
+    let mut s = Session::new(LadderPort::new());
+    arm(&mut s, "arm", &mut never()).unwrap();
+    let r = arm(&mut s, "arm", &mut never()).unwrap();
+    assert_eq!(r.verdict, Outcome::Done, "{}", r.message);
+    assert!(
+        r.message.starts_with("the MCU armed (STOP -> "),
+        "{}",
+        r.message
+    );
+}
