@@ -11,6 +11,7 @@ use protocol::{amr, cdc, pi_spi, teensy};
 use serde::{Deserialize, Serialize};
 use statemachine::{Estop, RejectReason};
 
+pub mod amr_link;
 pub mod device;
 pub mod exit;
 pub mod info;

@@ -22,6 +22,7 @@ macro_rules! out {
 
 use clap::{Args, Parser, Subcommand, ValueEnum};
 use motorlink::bridge::{Bridge, BridgeConfig};
+use motorlink::cli::amr_link::{self, AmrLinkArgs, AmrOpts};
 use motorlink::cli::device::{self, CdcVerb, DrivePlan, MovePlan, SendHex, TeensyVerb};
 use motorlink::cli::exit::{Exit, Failure, OrExit, Run};
 use motorlink::cli::pi;
@@ -44,7 +45,7 @@ use statemachine::Estop;
     name = "motorlink",
     version,
     after_help = motorlink::cli::exit::TABLE,
-    about = "Host side of the AMR motor controller: simulator, frame tools, device monitor, serial board verbs, and the Raspberry Pi SPI link's verbs (ping, monitor, drive --kind pi-spi)"
+    about = "Host side of the AMR motor controller: simulator, frame tools, device monitor, serial board verbs, the Raspberry Pi SPI link's verbs (ping, monitor, drive --kind pi-spi), and the operator's verbs of the AMR SPI link (list, arm, rearm, disarm, estop, drive --v --w, teleop, top; --sim for the simulated board)"
 )]
 struct Cli {
     #[command(subcommand)]
@@ -72,6 +73,9 @@ enum SerialKind {
     Teensy,
     /// The Raspberry Pi SPI link over spidev (the device is /dev/spidevB.C): drive (and ping, monitor).
     PiSpi,
+    /// The AMR SPI link over spidev (/dev/spidevB.C): drive --v --w, estop (and arm,
+    /// disarm, rearm, teleop, top).
+    Spi,
 }
 
 /// What every board verb takes.
@@ -88,6 +92,38 @@ struct SerialArgs {
     /// How long to wait for each reply (ACK, echo, STATUS), ms.
     #[arg(long, default_value_t = 500)]
     wait_ms: u64,
+}
+
+/// The link of `drive` and `estop`: a serial board, a spidev device (--kind pi-spi, --kind spi),
+/// or the simulated AMR board (--sim, no device).
+#[derive(Args)]
+struct AnyLinkArgs {
+    /// Device: serial (/dev/ttyACM0, /dev/ttyUSB0, a pty such as /dev/pts/5) or spidev
+    /// (/dev/spidev0.0 with --kind spi or pi-spi); none with --sim.
+    device: Option<String>,
+    /// Link kind; each verb defaults to the protocol it speaks (--v, --w and --sim imply spi).
+    #[arg(long, value_enum)]
+    kind: Option<SerialKind>,
+    /// Baud rate (a USB CDC device and a pty ignore it).
+    #[arg(long, default_value_t = 115_200)]
+    baud: u32,
+    /// How long to wait for each reply (ACK, echo, STATUS), ms.
+    #[arg(long, default_value_t = 500)]
+    wait_ms: u64,
+}
+
+impl AnyLinkArgs {
+    /// The serial board's link (a device is required).
+    fn serial(self) -> Result<SerialArgs, Failure> {
+        Ok(SerialArgs {
+            device: self
+                .device
+                .ok_or_else(|| Failure::usage("give the device (e.g. /dev/ttyACM0)"))?,
+            kind: self.kind,
+            baud: self.baud,
+            wait_ms: self.wait_ms,
+        })
+    }
 }
 
 /// `on` / `off`.
@@ -124,6 +160,8 @@ Exit status:
 The device is opened exclusively in raw mode; bytes that arrived before the open are dropped, so
 each run sees only replies to itself. Several runs in sequence on one pty (QEMU -serial pty) work.";
 
+// Parsed once per run: the size of the largest verb (drive's options) does not matter.
+#[allow(clippy::large_enum_variant)]
 #[derive(Subcommand)]
 enum Cmd {
     /// Run the built-in scenarios (or the given scenario files) and write traces, table and plots.
@@ -258,19 +296,35 @@ enum Cmd {
         #[command(flatten)]
         link: SerialArgs,
     },
-    /// USB CDC four-motor link: ESTOP engage|release, wait for its ACK.
+    /// USB CDC four-motor link: ESTOP engage|release, wait for its ACK. AMR SPI link (--kind spi,
+    /// --sim): brake by a frame gap, or check that no ESTOP holds (--release).
     ///
-    /// engage latches BRAKE at once. release clears this link's ESTOP; the board stays braked
-    /// until re-armed (`drive --enable`). Last line as for `enable` (msg_id 3).
+    /// USB CDC four-motor link: engage latches BRAKE at once. release clears this link's ESTOP; the board stays
+    /// braked until re-armed (`drive --enable`). Last line as for `enable` (msg_id 3).
+    ///
+    /// AMR SPI link (`estop [--release] DEVICE --kind spi`, or `estop [--release] --sim`): the link
+    /// has no ESTOP message; the board's ESTOP is its own input. `estop` stops sending frames for
+    /// 20 ms: the ladder goes HOLD at 2 ms, STOP at 5 and BRAKE (latched, COMM_LOST) at 10 ms, the
+    /// fastest stop a host can cause; then enable-0 frames read the feedback back. Exit 0 if the
+    /// MCU shows BRAKE, 1 if not. Clear the latch with `rearm`. `estop --release` releases nothing
+    /// (there is nothing of the host's to release): it reads the feedback and exits 0 if no ESTOP
+    /// holds, 1 if the board's ESTOP input is still engaged (release it at the robot; `rearm` is
+    /// refused by the board until then).
     #[command(after_long_help = VERB_HELP)]
     Estop {
-        /// engage or release.
-        #[arg(value_enum)]
-        action: EstopArg,
+        /// engage | release (USB CDC four-motor link). On the AMR link optional (engage unless --release), and
+        /// the device may come first: `estop /dev/spidev0.0 --kind spi`.
+        action: Option<String>,
         #[command(flatten)]
-        link: SerialArgs,
+        link: AnyLinkArgs,
+        /// The same as the action `release`.
+        #[arg(long, conflicts_with = "action")]
+        release: bool,
+        #[command(flatten)]
+        amr: AmrOpts,
     },
     /// USB CDC four-motor link: send SET_MOTOR_PWM at a fixed rate for a while, then stop sending.
+    /// AMR SPI link (--kind spi, --sim): drive a twist (--v, --w).
     ///
     /// Frames go out on absolute deadlines (--hz; the first at once) for --seconds; every STATUS,
     /// IMU and ACK received is printed. Then nothing more is sent: the board brakes on its own
@@ -302,10 +356,18 @@ enum Cmd {
     /// Verdict: no_reply (exit 69) if update_time never advanced (no TxBuffer decoded, or a stale
     /// board); refused (exit 1) if commands ran for 0.2 s or more, some motor was commanded to move
     /// and none of those changed motor.position; done (exit 0) otherwise.
+    ///
+    /// AMR SPI link (`drive DEVICE --kind spi --v V --w W`, or `drive --sim --v V --w W`): runs the
+    /// 1 kHz bridge, arms (enable 0, then the 0->1 edge; the MCU must leave BRAKE within 0.5 s, else
+    /// exit 1 with the faults that hold it), commands the twist (v m/s, w rad/s, within the wheels'
+    /// 18 rad/s) for --seconds, then commands zero until the wheels stand and sends enable 0
+    /// (STOP); the same on Ctrl-C. Prints a summary of the MCU's feedback (distance and heading
+    /// from the wheel speeds, means over the second half, peaks, modes seen, diagnostics); --json
+    /// prints it as one object. Exit 0 done, 1 the MCU braked or refused to arm, 69 no feedback.
     #[command(after_long_help = VERB_HELP)]
     Drive {
         #[command(flatten)]
-        link: SerialArgs,
+        link: AnyLinkArgs,
         /// Duties of motors 1 to 4, -1000 ..= 1000 (full scale), e.g. --pwm 300,-300,0,0 (required
         /// for --kind serial).
         #[arg(long, allow_hyphen_values = true)]
@@ -325,6 +387,101 @@ enum Cmd {
         enable: bool,
         #[command(flatten)]
         pi: pi::PiDriveArgs,
+        /// AMR link: forward speed, m/s.
+        #[arg(long = "v", allow_hyphen_values = true)]
+        amr_v: Option<f64>,
+        /// AMR link: yaw rate, rad/s (counter-clockwise positive).
+        #[arg(long = "w", allow_hyphen_values = true)]
+        amr_w: Option<f64>,
+        #[command(flatten)]
+        amr: AmrOpts,
+    },
+    /// List serial ports and spidev devices, with the link kinds (--kind) each can serve.
+    ///
+    /// Serial ports come from the serialport crate's enumeration (sysfs: USB VID:PID,
+    /// manufacturer, product, serial number), spidev devices from /dev/spidev*. --json:
+    /// {"devices":[{"path","bus","vid","pid","manufacturer","product","serial_number",
+    /// "kinds":[..],"note"}]}.
+    List {
+        /// Print JSON instead of text.
+        #[arg(long)]
+        json: bool,
+    },
+    /// AMR SPI link: arm (enable 0, then the 0->1 edge, then fresh frames) and report whether the
+    /// MCU left BRAKE.
+    ///
+    /// The drive stays armed only while frames keep coming: after the MCU's answer this verb
+    /// commands zero and enable 0 (STOP), and when it exits the board latches BRAKE (COMM_LOST)
+    /// 10 ms after its last frame. Use it to check that the drive can be armed; drive with
+    /// `drive` or `teleop`. Exit 0 the MCU left BRAKE, 1 it stayed (the faults holding it and what
+    /// to do are printed), 69 no valid feedback (or no device), 64 a bad argument, 74 a failed exchange.
+    Arm {
+        #[command(flatten)]
+        link: AmrLinkArgs,
+    },
+    /// AMR SPI link: enable 0 (the ladder's STOP: zero speed under the speed loop, bounded
+    /// deceleration) until the wheels stand, at most --seconds; report the MCU's mode.
+    ///
+    /// Exit 0 the MCU left NORMAL/REDUCED and the wheels stand, 1 they still turn, 69 no feedback.
+    /// When the verb exits its frames end and the board latches BRAKE 10 ms later.
+    Disarm {
+        #[command(flatten)]
+        link: AmrLinkArgs,
+        /// The longest wait for the wheels to stand, s.
+        #[arg(long, default_value_t = 2.0)]
+        seconds: f64,
+    },
+    /// AMR SPI link: clear a BRAKE latch (the ladder's rule: an explicit re-arm, the enable 0->1
+    /// edge, plus fresh valid frames); the MCU decides.
+    ///
+    /// Runs the bridge until the MCU's feedback shows it out of BRAKE or 0.5 s pass, and reports
+    /// what it did. Exit 0 the MCU left BRAKE (or was not in BRAKE), 1 it stayed in BRAKE (a
+    /// latching cause is active: a held ESTOP input, overcurrent, ...; printed with what to do),
+    /// 69 no valid feedback. Then commands zero and enable 0; the board brakes again (COMM_LOST)
+    /// 10 ms after the verb's last frame: on this link a drive is armed while frames flow.
+    Rearm {
+        #[command(flatten)]
+        link: AmrLinkArgs,
+    },
+    /// AMR SPI link: live view in the terminal (mode, feedback age, wheel speeds, currents,
+    /// faults, link counters, clock sync, plots of the wheel speeds and the mode).
+    ///
+    /// Watches only: it sends enable-0 frames (the MCU needs frames to answer; enable 0 never
+    /// moves the robot) and never arms. Ends with q, Esc, Ctrl-C or --seconds; the terminal is
+    /// always restored, then the run's summary is printed (--json: as one object). The `monitor`
+    /// verb prints JSON lines instead.
+    Top {
+        #[command(flatten)]
+        link: AmrLinkArgs,
+        /// Stop after this long, s (default: until q).
+        #[arg(long)]
+        seconds: Option<f64>,
+    },
+    /// AMR SPI link: drive with the keyboard, in the live view of `top`.
+    ///
+    /// Arms at start. w/s or up/down step v by 0.05 m/s, a/d or left/right step w by 0.25 rad/s
+    /// (within --max-v, --max-w); space: zero; x: stop by a frame gap (BRAKE latched); r: re-arm;
+    /// q, Esc or Ctrl-C: command zero, wait for the wheels to stand, enable 0, quit. The twist is
+    /// sent only while keys keep coming: for --hold-ms after the last key (a held key repeats, and
+    /// repeats of the same key within 100 ms keep it alive without stepping again). Then nothing is
+    /// sent and the bridge's 200 ms cmd_vel staleness rule ramps the wheels to zero, so a dead
+    /// terminal or a lost ssh session stops the robot; the twist is forgotten (the next key starts
+    /// from zero). The terminal is always restored.
+    Teleop {
+        #[command(flatten)]
+        link: AmrLinkArgs,
+        /// Largest forward speed, m/s.
+        #[arg(long, default_value_t = amr_link::teleop::TeleopConfig::DEFAULT.max_v)]
+        max_v: f64,
+        /// Largest yaw rate, rad/s.
+        #[arg(long, default_value_t = amr_link::teleop::TeleopConfig::DEFAULT.max_w)]
+        max_w: f64,
+        /// How long the twist is still sent after the last key, ms.
+        #[arg(long, default_value_t = 750)]
+        hold_ms: u64,
+        /// Stop after this long, s (default: until q).
+        #[arg(long)]
+        seconds: Option<f64>,
     },
     /// Teensy serial link: MTRS to absolute angles at a fixed rate (or once), checking every echo.
     ///
@@ -1096,6 +1253,7 @@ fn pi_drive(
 /// Checks that a verb's `--kind` is the protocol it speaks.
 fn expect_kind(kind: Option<SerialKind>, want: SerialKind, instead: &str) -> Result<(), Failure> {
     match kind {
+        Some(SerialKind::Spi) if want != SerialKind::Spi => Err(Failure::usage(NOT_AMR)),
         Some(SerialKind::PiSpi) if want != SerialKind::PiSpi => Err(Failure::usage(NOT_PI)),
         Some(k) if k != want => Err(Failure::usage(instead)),
         _ => Ok(()),
@@ -1123,6 +1281,8 @@ const NOT_TEENSY: &str =
     "this verb speaks the USB CDC four-motor link (--kind serial); for a Teensy serial link arm use move, cal, endeff, config";
 const NOT_PI: &str =
     "the Raspberry Pi SPI link (--kind pi-spi) has the verbs ping, monitor and drive (ping and monitor never command the motors)";
+const NOT_AMR: &str =
+    "the AMR SPI link (--kind spi) has the verbs drive --v --w, estop, arm, disarm, rearm, teleop, top";
 const NOT_SERIAL: &str =
     "this verb speaks the Teensy serial link (--kind teensy); for a USB CDC four-motor board use enable, estop, drive";
 
@@ -1134,7 +1294,50 @@ fn board_verb(cmd: Cmd) -> Run {
             expect_kind(link.kind, SerialKind::Serial, NOT_TEENSY)?;
             cdc_verb(&link, &CdcVerb::Enable(on(state)))
         }
-        Cmd::Estop { action, link } => {
+        Cmd::Estop {
+            action,
+            link,
+            release,
+            amr,
+        } => {
+            let word = |w: &str| match w {
+                "engage" => Some(EstopArg::Engage),
+                "release" => Some(EstopArg::Release),
+                _ => None,
+            };
+            let mut link = link;
+            let action = match action {
+                Some(a) if word(&a).is_none() && link.device.is_none() => {
+                    link.device = Some(a);
+                    None
+                }
+                Some(a) => Some(word(&a).ok_or_else(|| {
+                    Failure::usage(format!(
+                        "estop: '{a}' is neither engage nor release; nothing was sent"
+                    ))
+                })?),
+                None => None,
+            };
+            if amr.sim || link.kind == Some(SerialKind::Spi) {
+                let release = release || matches!(action, Some(EstopArg::Release));
+                let verb = if release {
+                    amr_link::Verb::EstopRelease
+                } else {
+                    amr_link::Verb::Estop
+                };
+                return amr_link::exec(
+                    verb,
+                    link.device.as_deref(),
+                    amr_link::DEFAULT_SPI_HZ,
+                    &amr,
+                );
+            }
+            let action = match (action, release) {
+                (Some(a), _) => a,
+                (None, true) => EstopArg::Release,
+                (None, false) => return Err(Failure::usage("estop needs engage or release (USB CDC four-motor link), or --kind spi / --sim for the AMR SPI link")),
+            };
+            let link = link.serial()?;
             expect_kind(link.kind, SerialKind::Serial, NOT_TEENSY)?;
             let a = match action {
                 EstopArg::Engage => Estop::Engage,
@@ -1150,7 +1353,37 @@ fn board_verb(cmd: Cmd) -> Run {
             seconds,
             enable,
             pi,
+            amr_v,
+            amr_w,
+            amr,
         } => {
+            let amr_given = amr.sim || amr_v.is_some() || amr_w.is_some();
+            if link.kind == Some(SerialKind::Spi) || (link.kind.is_none() && amr_given) {
+                if pwm.is_some() || enable || hz.is_some() {
+                    return Err(Failure::usage("--pwm, --enable and --hz are the serial drive's; the AMR link takes --v and --w; nothing was sent"));
+                }
+                if let Some(flag) = pi.first_given().filter(|f| *f != "--speed") {
+                    return Err(Failure::usage(format!("{flag} is an option of drive --kind pi-spi; the AMR link takes --v and --w; nothing was sent")));
+                }
+                if amr_v.is_none() && amr_w.is_none() {
+                    return Err(Failure::usage(
+                        "drive on the AMR link needs --v (m/s) and/or --w (rad/s), e.g. --v 0.3",
+                    ));
+                }
+                let verb = amr_link::Verb::Drive {
+                    v: amr_v.unwrap_or(0.0),
+                    w: amr_w.unwrap_or(0.0),
+                    seconds,
+                };
+                let speed = pi.speed.unwrap_or(amr_link::DEFAULT_SPI_HZ);
+                return amr_link::exec(verb, link.device.as_deref(), speed, &amr);
+            }
+            if amr_given {
+                return Err(Failure::usage(
+                    "--v, --w and --sim are the AMR link's (--kind spi); nothing was sent",
+                ));
+            }
+            let link = link.serial()?;
             if link.kind == Some(SerialKind::PiSpi) {
                 return pi_drive(&link, pwm.is_some(), &pi, hz, seconds);
             }
@@ -1222,8 +1455,53 @@ fn board_verb(cmd: Cmd) -> Run {
                 SerialKind::Serial => cdc_verb(&link, &CdcVerb::SendHex(h)),
                 SerialKind::Teensy => teensy_verb(&link, motors, &TeensyVerb::SendHex(h)),
                 SerialKind::PiSpi => Err(Failure::usage(NOT_PI)),
+                SerialKind::Spi => Err(Failure::usage(NOT_AMR)),
             }
         }
+        Cmd::List { json } => amr_link::exec_list(json),
+        Cmd::Arm { link } => amr_link::exec(
+            amr_link::Verb::Arm,
+            link.device.as_deref(),
+            link.speed,
+            &link.opts,
+        ),
+        Cmd::Rearm { link } => amr_link::exec(
+            amr_link::Verb::Rearm,
+            link.device.as_deref(),
+            link.speed,
+            &link.opts,
+        ),
+        Cmd::Top { link, seconds } => amr_link::exec_tui(
+            None,
+            link.device.as_deref(),
+            link.speed,
+            &link.opts,
+            seconds,
+        ),
+        Cmd::Teleop {
+            link,
+            max_v,
+            max_w,
+            hold_ms,
+            seconds,
+        } => amr_link::exec_tui(
+            Some(amr_link::teleop::TeleopConfig {
+                max_v,
+                max_w,
+                hold_us: hold_ms.saturating_mul(1000),
+                ..amr_link::teleop::TeleopConfig::DEFAULT
+            }),
+            link.device.as_deref(),
+            link.speed,
+            &link.opts,
+            seconds,
+        ),
+        Cmd::Disarm { link, seconds } => amr_link::exec(
+            amr_link::Verb::Disarm(seconds),
+            link.device.as_deref(),
+            link.speed,
+            &link.opts,
+        ),
         _ => Err(Failure::usage("internal: not a board verb")),
     }
 }
