@@ -12,6 +12,7 @@ pub mod feedback;
 pub mod kinematics;
 pub mod link;
 pub mod pacing;
+pub mod ros;
 pub mod serial;
 pub mod simhost;
 pub mod transport;

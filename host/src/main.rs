@@ -438,6 +438,40 @@ enum Cmd {
         #[arg(long, default_value_t = 60.0)]
         seconds: f64,
     },
+    /// Run the ROS 2 node: cmd_vel into the 1 kHz bridge; odom, /tf, joint_states, /diagnostics out.
+    ///
+    /// Pure-Rust DDS (RustDDS): no ROS installation needed; ROS 2 tools on the same network and
+    /// domain see the node. Subscribes `cmd_vel` (geometry_msgs/Twist, or TwistStamped with
+    /// `topics.cmd_vel_stamped`); a command older than 200 ms is replaced by zero. Publishes `odom`
+    /// (nav_msgs/Odometry), the odom -> base_link TF on `/tf`, `joint_states` and `/diagnostics`
+    /// (mode, arming state, cmd_vel age, fault flags by name, link counters, clock sync). Services:
+    /// `~/arm` and `~/estop` (std_srvs/SetBool), `~/disarm` and `~/rearm` (std_srvs/Trigger); each
+    /// reply says what the MCU did. `battery_state` and `imu/data_raw` are not published: the AMR
+    /// SPI feedback carries no battery or IMU data.
+    ///
+    /// Signals: SIGUSR1 stops every exchange (ESTOP: the MCU brakes on comm loss) and disarms,
+    /// SIGUSR2 resumes them (still disarmed), SIGINT/SIGTERM disarm, send 50 frames with
+    /// enable = 0 and exit. Parameters: a ROS 2 parameter file (example: host/ros/params.yaml).
+    Ros {
+        /// Parameter file (`<node name>: ros__parameters: {...}`); default: built-in defaults.
+        #[arg(long)]
+        params: Option<PathBuf>,
+        /// Run against the simulated MCU (lockstep clock) instead of the device.
+        #[arg(long)]
+        sim: bool,
+        /// spidev device; overrides the parameter `device`.
+        #[arg(long)]
+        device: Option<String>,
+        /// Start the arming sequence at once (as a call of `~/arm` would).
+        #[arg(long)]
+        arm: bool,
+        /// Do not ask for SCHED_FIFO on the bridge thread.
+        #[arg(long)]
+        no_realtime: bool,
+        /// Check the parameter file, print the parameters as JSON and exit.
+        #[arg(long)]
+        check: bool,
+    },
 }
 
 /// A duration from user input: negative or NaN is zero, too large is a year.
@@ -991,6 +1025,53 @@ fn loop_bench(seconds: f64) -> Result<(), String> {
     Ok(())
 }
 
+/// What `ros` was asked.
+struct RosArgs<'a> {
+    params: Option<&'a Path>,
+    sim: bool,
+    device: Option<String>,
+    arm: bool,
+    realtime: bool,
+    check: bool,
+}
+
+fn ros_node(a: &RosArgs<'_>) -> Result<u8, String> {
+    use motorlink::ros;
+    // Before any thread starts: every thread inherits the blocked signals.
+    let signals = ros::block_signals()?;
+    let file = match a.params {
+        Some(p) => ros::params::load(p).map_err(|e| e.to_string())?,
+        None => ros::ParamFile {
+            node_name: ros::params::DEFAULT_NODE_NAME.into(),
+            params: ros::Params::default(),
+        },
+    };
+    let mut params = file.params;
+    if let Some(d) = &a.device {
+        params.device.clone_from(d);
+    }
+    if a.check {
+        out!(
+            "{}",
+            serde_json::json!({"node_name": file.node_name, "params": params})
+        );
+        return Ok(0);
+    }
+    let (transport, hardware_id): (Box<dyn Transport + Send>, String) = if a.sim {
+        (sim_transport()?, "sim".into())
+    } else {
+        let t = SpiTransport::open(&params.device, params.spi_hz).map_err(|e| e.to_string())?;
+        (Box::new(t), params.device.clone())
+    };
+    let setup = ros::node_setup(file.node_name, params, hardware_id, a.arm, a.realtime);
+    ros::run(&setup, transport, signals).map(|()| 0)
+}
+
+/// The simulated MCU behind `ros --sim`.
+fn sim_transport() -> Result<Box<dyn Transport + Send>, String> {
+    Err("--sim needs the simulated MCU, which this build does not have yet".into())
+}
+
 fn main() -> ExitCode {
     let cli = Cli::parse();
     let r: Result<u8, String> = match cli.cmd {
@@ -1077,6 +1158,21 @@ fn main() -> ExitCode {
         )
         .map(|()| 0),
         Cmd::LoopBench { seconds } => loop_bench(seconds).map(|()| 0),
+        Cmd::Ros {
+            params,
+            sim,
+            device,
+            arm,
+            no_realtime,
+            check,
+        } => ros_node(&RosArgs {
+            params: params.as_deref(),
+            sim,
+            device,
+            arm,
+            realtime: !no_realtime,
+            check,
+        }),
         verb => board_verb(verb),
     };
     match r {

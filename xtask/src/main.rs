@@ -7,9 +7,13 @@
 //! --output-into-files` writes (one file per harness, named by its path) and prints the Markdown
 //! table of `proofs/REPORT.md`: harness, result, checks, covers, verification time, one row per
 //! harness in name order, so the report's figures come from a run, not from typing.
+//!
+//! `ros-e2e`: `motorlink ros --sim` against Cyclone DDS's Python binding in a network namespace of
+//! its own (see `ros_e2e`).
 #![forbid(unsafe_code)]
 
 mod e2e;
+mod ros_e2e;
 
 use std::fmt::Write as _;
 use std::path::Path;
@@ -119,6 +123,21 @@ fn main() -> ExitCode {
                 ExitCode::FAILURE
             }
         },
+        ["ros-e2e"] => {
+            let root = Path::new(env!("CARGO_MANIFEST_DIR"))
+                .parent()
+                .unwrap_or(Path::new("."));
+            match ros_e2e::run(root) {
+                Ok(summary) => {
+                    println!("{summary}");
+                    ExitCode::SUCCESS
+                }
+                Err(e) => {
+                    eprintln!("xtask ros-e2e: FAILED: {e}");
+                    ExitCode::FAILURE
+                }
+            }
+        }
         ["qemu-e2e", profile] => {
             let root = Path::new(env!("CARGO_MANIFEST_DIR"))
                 .parent()
@@ -136,7 +155,7 @@ fn main() -> ExitCode {
         }
         _ => {
             eprintln!(
-                "usage: cargo xtask kani-table <dir of `--output-into-files` results>\n       cargo xtask qemu-e2e <cdc|teensy>"
+                "usage: cargo xtask kani-table <dir of `--output-into-files` results>\n       cargo xtask qemu-e2e <cdc|teensy>\n       cargo xtask ros-e2e"
             );
             ExitCode::FAILURE
         }
