@@ -12,13 +12,16 @@ pub mod feedback;
 pub mod kinematics;
 pub mod link;
 pub mod pacing;
+pub mod record;
 pub mod ros;
 pub mod serial;
 pub mod simhost;
+pub mod simlink;
 pub mod transport;
 
 pub use bridge::{ArmState, Bridge, BridgeConfig, Diagnostic};
 pub use clocksync::{ClockSync, ClockSyncConfig};
 pub use kinematics::{DiffDrive, DiffDriveConfig, GeometryError};
 pub use simhost::SimHost;
+pub use simlink::{SimClock, SimConfig, SimMcu, Truth};
 pub use transport::{ByteStream, LinkError, Transport};

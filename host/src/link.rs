@@ -45,15 +45,37 @@ impl<T: Transport> Link<T> {
         self.exchange()
     }
 
-    /// One exchange now, without waiting.
+    /// One exchange now, without waiting, on the link's own clock.
     pub fn exchange(&mut self) -> Result<Vec<(u64, Diagnostic)>, LinkError> {
+        let t_send = self.now_us();
+        self.exchange_timed(t_send, None)
+    }
+
+    /// One exchange without waiting, the host times given by the caller instead of read from the
+    /// link's clock: the command is built for `t_send`, and the feedback is taken as received at
+    /// `t_recv` (µs, on one clock of the caller's). A transport with a clock of its own (the
+    /// simulated board in lockstep, [`crate::simlink::SimMcu`]) runs the bridge on that clock, so
+    /// a host thread that the machine starves does not look like a late host or a frozen MCU.
+    pub fn exchange_at(
+        &mut self,
+        t_send: u64,
+        t_recv: u64,
+    ) -> Result<Vec<(u64, Diagnostic)>, LinkError> {
+        self.exchange_timed(t_send, Some(t_recv))
+    }
+
+    /// The exchange; `t_recv` read from the link's clock after the transfer when `None`.
+    fn exchange_timed(
+        &mut self,
+        t_send: u64,
+        t_recv: Option<u64>,
+    ) -> Result<Vec<(u64, Diagnostic)>, LinkError> {
         let mut tx = [0u8; FRAME_LEN];
         let mut rx = [0u8; FRAME_LEN];
-        let t_send = self.now_us();
         let cmd = self.bridge.next_command(t_send);
         amr::encode_command(&cmd, &mut tx);
         let r = self.transport.exchange(&tx, &mut rx);
-        let t_recv = self.now_us();
+        let t_recv = t_recv.unwrap_or_else(|| self.now_us());
         match r {
             Ok(()) => {
                 let frame = amr::decode_mcu_frame(&rx);

@@ -24,7 +24,7 @@ use statemachine::Speed;
 
 type Output = statemachine::Output<AXES>;
 
-use crate::plant::BridgeDrive;
+use crate::plant::{BridgeDrive, Plant, PlantParams};
 
 /// The simulated firmware's version: the board application's.
 const FW_VERSION: u32 = pack_fw_version(0, 1, 0);
@@ -32,9 +32,26 @@ const FW_VERSION: u32 = pack_fw_version(0, 1, 0);
 /// Counts of the board's tick timer per 1 ms tick (TIM2 at 84 MHz, prescaler 2).
 pub const TICK_COUNTS: u32 = 42_000;
 /// Simulation steps (current-loop periods) per tick.
-const STEPS_PER_TICK: u64 = 20;
+pub const STEPS_PER_TICK: u64 = 20;
 /// Level of the hardware overcurrent comparator on the break input, A.
 pub const COMPARATOR_AMPS: f64 = 15.0;
+
+/// The AMR board's tuning (`mcu::tuning::AMR`) for the encoders of `plant`: its counts per
+/// revolution and the speed scale they give at the speed loop's rate (the AMR figure if the
+/// scale does not fit the fixed-point format).
+pub fn amr_tuning(plant: &PlantParams) -> Tuning {
+    Tuning {
+        counts_per_rev: plant.counts_per_rev,
+        speed_scale: control::sense::speed_scale(plant.counts_per_rev, mcu::tuning::AMR.speed_hz)
+            .unwrap_or(mcu::tuning::AMR.speed_scale),
+        ..mcu::tuning::AMR
+    }
+}
+
+/// The encoder counters (left, right) as the board's timers read the plant's wheels.
+pub fn encoder_counters(plant: &Plant) -> [u16; 2] {
+    [plant.encoder_counter(0), plant.encoder_counter(1)]
+}
 
 /// The simulated H-bridges: what the firmware's TIM1/TIM8 registers would hold.
 pub type SimBridge = RecordingBridge;

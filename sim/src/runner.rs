@@ -459,16 +459,8 @@ fn run_amr<H: HostModel>(
     let host_clock = |t: f64| (HOST_EPOCH_US + t * 1e6 * host_rate).max(0.0) as u64;
     let mut rng = Rng::new(sc.seed);
     let mut plant = Plant::new(sc.plant);
-    let tuning = mcu::tuning::Tuning {
-        counts_per_rev: sc.plant.counts_per_rev,
-        speed_scale: control::sense::speed_scale(
-            sc.plant.counts_per_rev,
-            mcu::tuning::AMR.speed_hz,
-        )
-        .unwrap_or(mcu::tuning::AMR.speed_scale),
-        ..mcu::tuning::AMR
-    };
-    let counters = |pl: &Plant| [pl.encoder_counter(0), pl.encoder_counter(1)];
+    let tuning = crate::board::amr_tuning(&sc.plant);
+    let counters = crate::board::encoder_counters;
     let mut mcu = SimBoard::new(tuning, counters(&plant), (ResetCause::PowerOn, 0));
     let mut last_feed = 0.0f64;
     // The stamp of the feedback in the MCU's tx buffer: (MCU µs, true time).
