@@ -28,6 +28,7 @@ use motorlink::cli::{self, FrameKind};
 use motorlink::link::Link;
 use motorlink::pacing::Pacer;
 use motorlink::serial::{CdcLink, TeensyLink};
+use motorlink::simlink::SimMcu;
 use motorlink::transport::{NullTransport, SerialTransport, SpiTransport, Transport};
 use motorlink::SimHost;
 use protocol::amr::{self, MotorFeedback, FRAME_LEN};
@@ -1057,19 +1058,14 @@ fn ros_node(a: &RosArgs<'_>) -> Result<u8, String> {
         );
         return Ok(0);
     }
-    let (transport, hardware_id): (Box<dyn Transport + Send>, String) = if a.sim {
-        (sim_transport()?, "sim".into())
+    let (transport, hardware_id): (Box<dyn ros::NodeTransport + Send>, String) = if a.sim {
+        (Box::new(SimMcu::lockstep()), "sim (lockstep)".into())
     } else {
         let t = SpiTransport::open(&params.device, params.spi_hz).map_err(|e| e.to_string())?;
         (Box::new(t), params.device.clone())
     };
     let setup = ros::node_setup(file.node_name, params, hardware_id, a.arm, a.realtime);
     ros::run(&setup, transport, signals).map(|()| 0)
-}
-
-/// The simulated MCU behind `ros --sim`.
-fn sim_transport() -> Result<Box<dyn Transport + Send>, String> {
-    Err("--sim needs the simulated MCU, which this build does not have yet".into())
 }
 
 fn main() -> ExitCode {

@@ -30,7 +30,8 @@ use nix::sys::signal::{SigSet, Signal};
 use nix::sys::signalfd::{SfdFlags, SignalFd};
 
 use crate::bridge::BridgeConfig;
-use crate::transport::Transport;
+
+pub use runner::NodeTransport;
 
 pub use params::{ParamFile, Params};
 pub use shared::{Request, Shared};
@@ -88,7 +89,7 @@ pub struct NodeSetup {
 /// called before anything that starts a thread; pass its result here.
 pub fn run(
     setup: &NodeSetup,
-    transport: Box<dyn Transport + Send>,
+    transport: Box<dyn NodeTransport + Send>,
     signals: SignalGuard,
 ) -> Result<(), String> {
     let mut signals = signals.0;
@@ -113,7 +114,7 @@ pub fn run(
                         ),
                     }
                 }
-                runner::run(Boxed(transport), cfg, arm, &shared);
+                runner::run(transport, cfg, arm, &shared);
             })
             .map_err(|e| format!("cannot start the bridge thread: {e}"))?
     };
@@ -163,18 +164,6 @@ pub struct SignalGuard(Signals);
 /// thread started after) and returns the handle that reads them.
 pub fn block_signals() -> Result<SignalGuard, String> {
     Signals::block().map(SignalGuard)
-}
-
-/// A boxed transport as a sized one (the link is generic).
-struct Boxed(Box<dyn Transport + Send>);
-
-impl Transport for Boxed {
-    fn exchange(&mut self, tx: &[u8], rx: &mut [u8]) -> Result<(), crate::LinkError> {
-        self.0.exchange(tx, rx)
-    }
-    fn name(&self) -> &str {
-        self.0.name()
-    }
 }
 
 /// The setup of a run: `arm` if asked on the command line or by `arm_on_start`.

@@ -53,11 +53,14 @@ fn qos(q: &TopicQos) -> QosProfile {
     })
 }
 
-/// `~/x` as `<node>/x`; other names unchanged.
+/// The absolute name of `name` for a node in the root namespace: `~/x` is `/<node>/x`, a relative
+/// `x` is `/x` (resolved here: ros2-client would join the namespace `/` and `x` with a second
+/// slash, `rt//x`).
 fn resolve(name: &str, node: &str) -> Result<Name, String> {
     let full = match name.strip_prefix("~/") {
         Some(rest) => format!("/{node}/{rest}"),
-        None => name.to_string(),
+        None if name.starts_with('/') => name.to_string(),
+        None => format!("/{name}"),
     };
     Name::parse(&full).map_err(|e| format!("`{name}` is not a valid ROS 2 name: {e}"))
 }
@@ -555,10 +558,20 @@ mod tests {
         );
     }
 
+    /// The DDS topic names ROS 2 uses (design.ros2.org, "Topic and Service name mapping to DDS"):
+    /// `rt/` and the absolute name without its leading slash.
     #[test]
-    fn private_names_resolve_under_the_node() {
-        assert!(resolve("~/arm", "motorlink").is_ok());
-        assert!(resolve("cmd_vel", "motorlink").is_ok());
+    fn names_map_to_the_ros_2_dds_names() {
+        let node = NodeName::new("/", "motorlink").unwrap();
+        let dds = |n: &str| {
+            resolve(n, "motorlink")
+                .unwrap()
+                .to_dds_name("rt", &node, "")
+        };
+        assert_eq!(dds("cmd_vel"), "rt/cmd_vel");
+        assert_eq!(dds("/tf"), "rt/tf");
+        assert_eq!(dds("~/arm"), "rt/motorlink/arm");
+        assert_eq!(dds("robot1/odom"), "rt/robot1/odom");
         assert!(resolve("bad//name", "motorlink").is_err());
     }
 }

@@ -16,6 +16,49 @@ use crate::transport::Transport;
 
 use super::shared::{Request, Shared};
 
+/// A transport as the node drives it: a real device runs the bridge on the link's own clock; a
+/// simulated board in lockstep has a clock of its own, which the bridge must run on, and lets a
+/// millisecond pass with no frame while ESTOP keeps the link silent.
+pub trait NodeTransport: Transport {
+    /// The transport's own clock now, µs, and how long after sending the feedback is in hand; None
+    /// for a real device (the link's clock is the time).
+    fn board_clock(&self) -> Option<(u64, u64)> {
+        None
+    }
+    /// One period with no frame (a real device's time passes by itself).
+    fn idle_period(&mut self) {}
+}
+
+impl NodeTransport for crate::transport::SpiTransport {}
+
+impl NodeTransport for crate::simlink::SimMcu {
+    fn board_clock(&self) -> Option<(u64, u64)> {
+        (self.config().clock == crate::simlink::SimClock::Lockstep)
+            .then(|| (self.now_us(), crate::simlink::LOCKSTEP_RECV_US))
+    }
+    fn idle_period(&mut self) {
+        if self.config().clock == crate::simlink::SimClock::Lockstep {
+            self.idle(1);
+        }
+    }
+}
+
+impl<T: NodeTransport + ?Sized> NodeTransport for Box<T> {
+    fn board_clock(&self) -> Option<(u64, u64)> {
+        (**self).board_clock()
+    }
+    fn idle_period(&mut self) {
+        (**self).idle_period();
+    }
+}
+
+/// The bridge's time now: the board's clock where the transport has one, else the link's.
+fn now_of<T: NodeTransport>(link: &Link<T>) -> u64 {
+    link.transport
+        .board_clock()
+        .map_or_else(|| link.now_us(), |(t, _)| t)
+}
+
 /// Exchanges with enable = 0 sent after a stop request before the thread ends (50 ms).
 pub const SHUTDOWN_CYCLES: u32 = 50;
 
@@ -38,8 +81,8 @@ impl BridgeLoop {
     }
 
     /// One cycle after the deadline: hand-offs, one exchange, the snapshot.
-    pub fn cycle<T: Transport>(&mut self, link: &mut Link<T>, shared: &Shared) {
-        let now = link.now_us();
+    pub fn cycle<T: NodeTransport>(&mut self, link: &mut Link<T>, shared: &Shared) {
+        let now = now_of(link);
         if let Some(c) = shared.take_cmd_vel() {
             // The age it had on the shared clock, carried over to the link's clock.
             let age = shared.now_us().saturating_sub(c.received_us);
@@ -59,18 +102,35 @@ impl BridgeLoop {
                 Request::Estop(false) => self.silent = false,
             }
         }
-        if !self.silent {
-            match link.exchange() {
-                Ok(d) => self.pending.extend(d),
-                Err(e) => self.last_error = Some(e.to_string()),
-            }
-        }
+        self.exchange(link);
         let _ = self.publish(link, shared, false);
     }
 
+    /// One exchange on the bridge's clock, or, while ESTOP keeps the link silent, one period
+    /// without a frame.
+    fn exchange<T: NodeTransport>(&mut self, link: &mut Link<T>) {
+        if self.silent {
+            link.transport.idle_period();
+            return;
+        }
+        let r = match link.transport.board_clock() {
+            Some((t, recv)) => link.exchange_at(t, t.saturating_add(recv)),
+            None => link.exchange(),
+        };
+        match r {
+            Ok(d) => self.pending.extend(d),
+            Err(e) => self.last_error = Some(e.to_string()),
+        }
+    }
+
     /// Hands the state to the DDS side; false if it holds the lock (retried next cycle).
-    pub fn publish<T: Transport>(&mut self, link: &Link<T>, shared: &Shared, ended: bool) -> bool {
-        let now = link.now_us();
+    pub fn publish<T: NodeTransport>(
+        &mut self,
+        link: &Link<T>,
+        shared: &Shared,
+        ended: bool,
+    ) -> bool {
+        let now = now_of(link);
         let b: &Bridge = &link.bridge;
         let silent = self.silent;
         let age = self.cmd_vel_at.map(|t| now.saturating_sub(t));
@@ -114,12 +174,12 @@ pub fn request_realtime() -> Result<(), String> {
 
 /// Runs the bridge over `transport` until [`Shared::stop`], then disarms and sends
 /// [`SHUTDOWN_CYCLES`] more frames (unless ESTOP stopped the exchanges).
-pub fn run<T: Transport>(transport: T, cfg: BridgeConfig, arm: bool, shared: &Shared) {
+pub fn run<T: NodeTransport>(transport: T, cfg: BridgeConfig, arm: bool, shared: &Shared) {
     let mut link = Link::new(transport, Bridge::new(cfg));
     // Who answers (firmware version, reset cause) goes to the diagnostics.
     link.bridge.request_identity();
     if arm {
-        let now = link.now_us();
+        let now = now_of(&link);
         link.bridge.arm(now);
     }
     let mut l = BridgeLoop::new();
@@ -133,9 +193,7 @@ pub fn run<T: Transport>(transport: T, cfg: BridgeConfig, arm: bool, shared: &Sh
             break;
         }
         link.pacer.wait();
-        if let Err(e) = link.exchange() {
-            l.last_error = Some(e.to_string());
-        }
+        l.exchange(&mut link);
     }
     // The last snapshot must reach the DDS side: retry while it holds the lock.
     let mut tries = 0u32;
@@ -189,6 +247,8 @@ mod tests {
             "echo"
         }
     }
+
+    impl NodeTransport for EchoMcu {}
 
     fn link() -> Link<EchoMcu> {
         Link::new(EchoMcu::default(), Bridge::new(BridgeConfig::DEFAULT))
@@ -286,6 +346,7 @@ mod tests {
                         "rec"
                     }
                 }
+                impl NodeTransport for Rec<'_> {}
                 run(
                     Rec(&mut mcu, &mut sent),
                     BridgeConfig::DEFAULT,
