@@ -13,8 +13,10 @@ Checks, in order (every wait is generous: the machine may be busy):
   2. armed, +v commanded: the odom twist reaches about v and x grows at about v;
   3. the publisher process is killed: the bridge's 200 ms rule commands zero, the odom twist
      goes to 0 and the position stops changing; diagnostics say cmd_vel is stale;
-  4. SIGUSR1 stops the node's exchanges (ESTOP), SIGUSR2 resumes them: the MCU reports BRAKE
-     with comm_lost and brake_latched (its watchdog braked while no frame came);
+  4. the ~/estop service (std_srvs/SetBool true, rmw_cyclonedds's request header) stops the
+     node's exchanges, SIGUSR2 resumes them: the MCU reports BRAKE with comm_lost and
+     brake_latched (its watchdog braked while no frame came) and stays there until the ~/arm
+     service asks for the re-arm, whose reply says the MCU left BRAKE;
   5. SIGINT: the node exits with status 0.
 Exit status 0 if every check holds; 1 with the failed check otherwise.
 """
@@ -128,6 +130,25 @@ class DiagnosticArray(IdlStruct, typename="diagnostic_msgs::msg::dds_::Diagnosti
     status: t.sequence[DiagnosticStatus] = field(default_factory=list)
 
 
+# std_srvs/SetBool as rmw_cyclonedds puts it on the wire: a 16-byte header (the low half of the
+# client's GUID, the request's sequence number as high/low words) before the request or reply.
+@dataclass
+class SetBoolRequest(IdlStruct, typename="std_srvs::srv::dds_::SetBool_Request_"):
+    client: t.array[t.uint8, 8] = field(default_factory=lambda: [0] * 8)
+    seq_high: t.int32 = 0
+    seq_low: t.uint32 = 0
+    data: bool = False
+
+
+@dataclass
+class SetBoolResponse(IdlStruct, typename="std_srvs::srv::dds_::SetBool_Response_"):
+    client: t.array[t.uint8, 8] = field(default_factory=lambda: [0] * 8)
+    seq_high: t.int32 = 0
+    seq_low: t.uint32 = 0
+    success: bool = False
+    message: str = ""
+
+
 def qos(depth):
     return Qos(
         Policy.Reliability.Reliable(duration(seconds=1)),
@@ -210,6 +231,35 @@ class Watch:
             time.sleep(0.02)
 
 
+class SetBoolClient:
+    """A std_srvs/SetBool client of the node's service `name` (e.g. /motorlink/estop)."""
+
+    CLIENT = [0x6D, 0x6C, 0x72, 0x6F, 0x73, 0x74, 0x73, 0x74]
+
+    def __init__(self, dp, name):
+        base = name.lstrip("/")
+        self.writer = DataWriter(dp, Topic(dp, f"rq/{base}Request", SetBoolRequest), qos=qos(10))
+        self.reader = DataReader(dp, Topic(dp, f"rr/{base}Reply", SetBoolResponse), qos=qos(10))
+        self.seq = 0
+        self.name = name
+
+    def call(self, data, timeout):
+        """The reply (success, message) to SetBool(data), waiting for discovery first."""
+        end = time.monotonic() + timeout
+        while not (self.writer.get_matched_subscriptions() and self.reader.get_matched_publications()):
+            if time.monotonic() > end:
+                raise Failed(f"service {self.name} not discovered within {timeout} s")
+            time.sleep(0.05)
+        self.seq += 1
+        self.writer.write(SetBoolRequest(client=self.CLIENT, seq_high=0, seq_low=self.seq, data=data))
+        while time.monotonic() < end:
+            for r in self.reader.take(N=10):
+                if isinstance(r, SetBoolResponse) and list(r.client) == self.CLIENT and r.seq_low == self.seq:
+                    return r.success, r.message
+            time.sleep(0.02)
+        raise Failed(f"no reply from {self.name} within {timeout} s")
+
+
 def run(args):
     v_cmd = args.speed
     params = os.path.join(tempfile.mkdtemp(prefix="mlros-"), "params.yaml")
@@ -217,6 +267,7 @@ def run(args):
         f.write(
             "motorlink:\n  ros__parameters:\n"
             "    rates: {odom_hz: 50.0, joint_states_hz: 10.0, diagnostics_hz: 10.0}\n"
+            "    services: {mapping: cyclone}\n"
         )
     log = open(args.log, "w") if args.log else subprocess.DEVNULL
     node = subprocess.Popen(
@@ -265,15 +316,19 @@ def run(args):
                "the odom twist goes to 0")
         stop_s = time.monotonic() - killed
         check(True, f"stopped {stop_s:.2f} s after the publisher died (diagnostics at 10 Hz, odom at 50 Hz)")
-        w.collect(1.0)
+        # Half a second for the speed loop to settle at zero, then a second of odom.
+        w.collect(1.5)
         still = w.window(1.0)
         moved = math.hypot(still[-1][1] - still[0][1], still[-1][2] - still[0][2])
         check(len(still) >= 5 and moved < 1e-3, f"the position stops changing ({moved * 1e3:.3f} mm in 1 s)")
         check(w.diag.get("arm_state") == "armed" and w.diag.get("mode") in ("NORMAL", "REDUCED"),
               f"the bridge stays armed commanding zero; MCU {w.diag.get('mode')}")
 
-        # 4. ESTOP: the node stops exchanging frames; the MCU's watchdog brakes and latches.
-        node.send_signal(signal.SIGUSR1)
+        # 4. ESTOP (the service, std_srvs/SetBool): the node stops exchanging frames; the MCU's
+        # watchdog brakes and latches. Released by a signal (SIGUSR2), the same request.
+        estop = SetBoolClient(dp, "/motorlink/estop")
+        ok, msg = estop.call(True, args.discovery_timeout)
+        check(ok, f"~/estop true answered: {msg}")
         w.wait(lambda: w.diag.get("exchanges") == "stopped", 10, "diagnostics report exchanges stopped")
         time.sleep(0.5)
         node.send_signal(signal.SIGUSR2)
@@ -285,6 +340,14 @@ def run(args):
         check(w.diag.get("arm_state") == "disarmed", "the bridge is disarmed and does not re-arm by itself")
         w.collect(0.5)
         check(w.diag.get("mode") == "BRAKE", "still BRAKE: leaving it needs an explicit re-arm")
+
+        # The explicit re-arm (~/arm true): a request; the reply says what the MCU did.
+        arm = SetBoolClient(dp, "/motorlink/arm")
+        ok, msg = arm.call(True, args.discovery_timeout)
+        check(ok and "BRAKE" not in msg.split("(")[0], f"~/arm true answered: {msg}")
+        # After a comm loss the ladder may hold REDUCED for its clean window before NORMAL.
+        w.wait(lambda: w.diag.get("arm_state") == "armed" and w.diag.get("mode") in ("NORMAL", "REDUCED"),
+               10, "diagnostics report armed, the MCU out of BRAKE")
 
         # 5. A clean exit.
         node.send_signal(signal.SIGINT)
