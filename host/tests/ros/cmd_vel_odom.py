@@ -271,7 +271,7 @@ def run(args):
         )
     log = open(args.log, "w") if args.log else subprocess.DEVNULL
     node = subprocess.Popen(
-        [args.motorlink, "ros", "--sim", "--arm", "--params", params],
+        [args.motorlink, "ros", "--sim", "--arm", "--params", params] + (["--no-realtime"] if args.no_realtime else []),
         stdout=log,
         stderr=subprocess.STDOUT,
     )
@@ -371,6 +371,8 @@ def main():
     ap.add_argument("--speed", type=float, default=0.3, help="commanded v, m/s")
     ap.add_argument("--discovery-timeout", type=float, default=60.0)
     ap.add_argument("--log", help="write the node's output here")
+    ap.add_argument("--no-realtime", action="store_true",
+                    help="run the node's bridge thread at normal priority (as a user without RLIMIT_RTPRIO)")
     ap.add_argument("--publish", type=float, help=argparse.SUPPRESS)
     args = ap.parse_args()
     if args.publish is not None:
