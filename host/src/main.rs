@@ -28,7 +28,7 @@ use motorlink::cli::{self, FrameKind};
 use motorlink::link::Link;
 use motorlink::pacing::Pacer;
 use motorlink::serial::{CdcLink, TeensyLink};
-use motorlink::simlink::SimMcu;
+use motorlink::simlink::{SimClock, SimConfig, SimMcu};
 use motorlink::transport::{NullTransport, SerialTransport, SpiTransport, Transport};
 use motorlink::SimHost;
 use protocol::amr::{self, MotorFeedback, FRAME_LEN};
@@ -1059,7 +1059,13 @@ fn ros_node(a: &RosArgs<'_>) -> Result<u8, String> {
         return Ok(0);
     }
     let (transport, hardware_id): (Box<dyn ros::NodeTransport + Send>, String) = if a.sim {
-        (Box::new(SimMcu::lockstep()), "sim (lockstep)".into())
+        // The simulated robot has the parameters' geometry and encoders.
+        let mut cfg = SimConfig::new(SimClock::Lockstep);
+        cfg.plant.wheel_radius_m = params.geometry.wheel_radius_m;
+        cfg.plant.wheelbase_m = params.geometry.wheelbase_m;
+        cfg.plant.counts_per_rev = params.geometry.encoder_counts_per_rev;
+        let sim = SimMcu::new(cfg).map_err(|e| e.to_string())?;
+        (Box::new(sim), "sim (lockstep)".into())
     } else {
         let t = SpiTransport::open(&params.device, params.spi_hz).map_err(|e| e.to_string())?;
         (Box::new(t), params.device.clone())

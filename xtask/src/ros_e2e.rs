@@ -100,6 +100,24 @@ impl Drop for Netns {
     }
 }
 
+/// The command line that runs `cmd` in the namespace with `env`: as is when root; when not
+/// (`user` given), `ip netns exec` through `sudo -n`, then back to `user` inside.
+pub fn check_argv(user: Option<&str>, env: &[String], cmd: &[&str]) -> Vec<String> {
+    let mut argv: Vec<String> = Vec::new();
+    if user.is_some() {
+        argv.extend(["sudo".into(), "-n".into()]);
+    }
+    argv.extend(["ip", "netns", "exec", NETNS].map(String::from));
+    if let Some(u) = user {
+        // Back to the calling user inside the namespace: their Python and its packages.
+        argv.extend(["sudo", "-n", "-u", u].map(String::from));
+    }
+    argv.push("env".into());
+    argv.extend(env.iter().cloned());
+    argv.extend(cmd.iter().map(|s| (*s).to_string()));
+    argv
+}
+
 /// Builds the release motorlink, runs the Python check in the namespace; the summary or why it
 /// failed.
 pub fn run(root_dir: &Path) -> Result<String, String> {
@@ -130,33 +148,25 @@ pub fn run(root_dir: &Path) -> Result<String, String> {
     let log = out_dir.join("node.log");
     let ns = Netns::create(is_root)?;
     println!("network namespace {NETNS}: veth0 10.231.0.1/24, veth1 10.231.0.2/24, multicast routed via veth0");
-    let path = std::env::var("PATH").unwrap_or_default();
-    let home = std::env::var("HOME").unwrap_or_default();
-    let env_path = format!("PATH={path}");
-    let env_home = format!("HOME={home}");
-    let env_uri = format!("CYCLONEDDS_URI={CYCLONE_CONFIG}");
-    let ml_s = ml.display().to_string();
-    let script_s = script.display().to_string();
-    let log_s = log.display().to_string();
-    let mut argv: Vec<&str> = vec!["ip", "netns", "exec", NETNS];
-    if !is_root {
-        // Back to the calling user inside the namespace: their Python and its packages.
-        argv = [&["sudo", "-n"][..], &argv, &["sudo", "-n", "-u", &user]].concat();
-    }
-    argv.extend([
-        "env",
-        &env_path,
-        &env_home,
-        &env_uri,
-        &python,
-        &script_s,
-        "--motorlink",
-        &ml_s,
-        "--log",
-        &log_s,
-    ]);
+    let env = [
+        format!("PATH={}", std::env::var("PATH").unwrap_or_default()),
+        format!("HOME={}", std::env::var("HOME").unwrap_or_default()),
+        format!("CYCLONEDDS_URI={CYCLONE_CONFIG}"),
+    ];
+    let argv = check_argv(
+        (!is_root).then_some(user.as_str()),
+        &env,
+        &[
+            python.as_str(),
+            &script.display().to_string(),
+            "--motorlink",
+            &ml.display().to_string(),
+            "--log",
+            &log.display().to_string(),
+        ],
+    );
     println!("running {}", script.display());
-    let status = Command::new(argv[0])
+    let status = Command::new(&argv[0])
         .args(&argv[1..])
         .current_dir(root_dir)
         .status()
@@ -183,6 +193,29 @@ pub fn run(root_dir: &Path) -> Result<String, String> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn as_root_the_check_runs_in_the_namespace_directly() {
+        let a = check_argv(None, &["A=1".into()], &["python3", "t.py"]);
+        assert_eq!(
+            a,
+            ["ip", "netns", "exec", NETNS, "env", "A=1", "python3", "t.py"]
+        );
+    }
+
+    /// A GitHub runner is not root: sudo for the namespace, then the runner's user again inside,
+    /// so the check runs with the Python (and cyclonedds) of the user who started it.
+    #[test]
+    fn as_a_user_the_namespace_goes_through_sudo_and_back() {
+        let a = check_argv(Some("runner"), &["A=1".into()], &["python3", "t.py"]);
+        assert_eq!(
+            a,
+            [
+                "sudo", "-n", "ip", "netns", "exec", NETNS, "sudo", "-n", "-u", "runner", "env",
+                "A=1", "python3", "t.py"
+            ]
+        );
+    }
 
     #[test]
     fn the_namespace_is_created_first_and_multicast_is_routed() {
