@@ -85,8 +85,8 @@ pub struct NodeSetup {
     pub realtime: bool,
 }
 
-/// Runs the node over `transport` until SIGINT, SIGTERM or SIGHUP. `signals_blocked` must be
-/// called before anything that starts a thread; pass its result here.
+/// Runs the node over `transport` until SIGINT, SIGTERM or SIGHUP (or the DDS side fails).
+/// [`block_signals`] must be called before anything that starts a thread; pass its result here.
 pub fn run(
     setup: &NodeSetup,
     transport: Box<dyn NodeTransport + Send>,
