@@ -154,6 +154,17 @@ pub fn run(
         .join()
         .map_err(|_| "the DDS thread panicked".to_string())?;
     b.map_err(|_| "the bridge thread panicked".to_string())?;
+    let s = shared.snapshot();
+    eprintln!(
+        "motorlink ros: stopped after {} cycles: {} feedback ok, {} refused, {} not accepted, {} transport errors; pacing: {} periods outside 1 ms +- 0.2 ms, {} deadlines skipped",
+        s.cycles,
+        s.stats.feedback_ok,
+        s.stats.feedback_rejected,
+        s.stats.not_accepted,
+        s.transport_errors,
+        s.period_misses,
+        s.skipped_deadlines
+    );
     d
 }
 

@@ -268,6 +268,30 @@ pub fn run(node_name: &str, p: &Params, hardware_id: &str, shared: &Shared) -> R
         )
         .map_err(|e| err("the rearm service", e))?;
 
+    let dds_names: Vec<String> = [
+        (&t.cmd_vel, "cmd_vel in"),
+        (&t.odom, "odom"),
+        (&t.tf, "tf"),
+        (&t.joint_states, "joint_states"),
+        (&t.diagnostics, "diagnostics"),
+    ]
+    .iter()
+    .filter_map(|(name, what)| {
+        let node_name = NodeName::new("/", n).ok()?;
+        let dds = resolve(name, n).ok()?.to_dds_name("rt", &node_name, "");
+        Some(format!("{what} {dds}"))
+    })
+    .collect();
+    eprintln!(
+        "motorlink ros: domain {}, topics: {}; services {}, {}, {}, {} ({:?} mapping)",
+        p.domain_id,
+        dds_names.join(", "),
+        s.arm,
+        s.disarm,
+        s.rearm,
+        s.estop,
+        p.services.mapping
+    );
     let drive = p.drive().map_err(|e| e.to_string())?;
     let mut odo = Odometer::new(drive, p.geometry.encoder_counts_per_rev);
     let period = |hz: f64| Duration::from_secs_f64(1.0 / hz);
