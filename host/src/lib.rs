@@ -14,6 +14,7 @@ pub mod link;
 pub mod loopstats;
 pub mod pacing;
 pub mod record;
+pub mod ros;
 pub mod rt;
 pub mod serial;
 pub mod simhost;

@@ -31,6 +31,7 @@ use motorlink::link::Link;
 use motorlink::loopstats::{self, Goal, LoopStats};
 use motorlink::pacing::Pacer;
 use motorlink::serial::{CdcLink, TeensyLink};
+use motorlink::simlink::{SimClock, SimConfig, SimMcu};
 use motorlink::transport::{NullTransport, SerialTransport, SpiTransport, Transport};
 use motorlink::SimHost;
 use protocol::amr::{self, MotorFeedback, FRAME_LEN};
@@ -693,6 +694,40 @@ enum Cmd {
         rust_only: bool,
         #[command(flatten)]
         rt: RtArgs,
+    },
+    /// Run the ROS 2 node: cmd_vel into the 1 kHz bridge; odom, /tf, joint_states, /diagnostics out.
+    ///
+    /// Pure-Rust DDS (RustDDS): no ROS installation needed; ROS 2 tools on the same network and
+    /// domain see the node. Subscribes `cmd_vel` (geometry_msgs/Twist, or TwistStamped with
+    /// `topics.cmd_vel_stamped`); a command older than 200 ms is replaced by zero. Publishes `odom`
+    /// (nav_msgs/Odometry), the odom -> base_link TF on `/tf`, `joint_states` and `/diagnostics`
+    /// (mode, arming state, cmd_vel age, fault flags by name, link counters, clock sync). Services:
+    /// `~/arm` and `~/estop` (std_srvs/SetBool), `~/disarm` and `~/rearm` (std_srvs/Trigger); each
+    /// reply says what the MCU did. `battery_state` and `imu/data_raw` are not published: the AMR
+    /// SPI feedback carries no battery or IMU data.
+    ///
+    /// Signals: SIGUSR1 stops every exchange (ESTOP: the MCU brakes on comm loss) and disarms,
+    /// SIGUSR2 resumes them (still disarmed), SIGINT/SIGTERM disarm, send 50 frames with
+    /// enable = 0 and exit. Parameters: a ROS 2 parameter file (example: host/ros/params.yaml).
+    Ros {
+        /// Parameter file (`<node name>: ros__parameters: {...}`); default: built-in defaults.
+        #[arg(long)]
+        params: Option<PathBuf>,
+        /// Run against the simulated MCU (lockstep clock) instead of the device.
+        #[arg(long)]
+        sim: bool,
+        /// spidev device; overrides the parameter `device`.
+        #[arg(long)]
+        device: Option<String>,
+        /// Start the arming sequence at once (as a call of `~/arm` would).
+        #[arg(long)]
+        arm: bool,
+        /// Do not ask for SCHED_FIFO on the bridge thread.
+        #[arg(long)]
+        no_realtime: bool,
+        /// Check the parameter file, print the parameters as JSON and exit.
+        #[arg(long)]
+        check: bool,
     },
 }
 
@@ -1819,6 +1854,64 @@ fn parse() -> Result<Cli, ExitCode> {
     })
 }
 
+/// What `ros` was asked.
+struct RosArgs<'a> {
+    params: Option<&'a Path>,
+    sim: bool,
+    device: Option<String>,
+    arm: bool,
+    realtime: bool,
+    check: bool,
+}
+
+fn ros_node(a: &RosArgs<'_>) -> Run {
+    use motorlink::ros;
+    // Before any thread starts: every thread inherits the blocked signals.
+    let signals = ros::block_signals().or_exit(Exit::Io)?;
+    let file = match a.params {
+        Some(p) if !p.exists() => {
+            return Err(Failure::new(
+                Exit::NoInput,
+                format!("{}: no such parameter file", p.display()),
+            ))
+        }
+        Some(p) => {
+            ros::params::load(p).map_err(|e| Failure::new(Exit::DataRefused, e.to_string()))?
+        }
+        None => ros::ParamFile {
+            node_name: ros::params::DEFAULT_NODE_NAME.into(),
+            params: ros::Params::default(),
+        },
+    };
+    let mut params = file.params;
+    if let Some(d) = &a.device {
+        params.device.clone_from(d);
+    }
+    if a.check {
+        out!(
+            "{}",
+            serde_json::json!({"node_name": file.node_name, "params": params})
+        );
+        return Ok(Exit::Ok);
+    }
+    let (transport, hardware_id): (Box<dyn ros::NodeTransport + Send>, String) = if a.sim {
+        // The simulated robot has the parameters' geometry and encoders.
+        let mut cfg = SimConfig::new(SimClock::Lockstep);
+        cfg.plant.wheel_radius_m = params.geometry.wheel_radius_m;
+        cfg.plant.wheelbase_m = params.geometry.wheelbase_m;
+        cfg.plant.counts_per_rev = params.geometry.encoder_counts_per_rev;
+        let sim = SimMcu::new(cfg).map_err(|e| Failure::new(Exit::DataRefused, e.to_string()))?;
+        (Box::new(sim), "sim (lockstep)".into())
+    } else {
+        let t = SpiTransport::open(&params.device, params.spi_hz).or_exit(Exit::Unavailable)?;
+        (Box::new(t), params.device.clone())
+    };
+    let setup = ros::node_setup(file.node_name, params, hardware_id, a.arm, a.realtime);
+    ros::run(&setup, transport, signals)
+        .map(|()| Exit::Ok)
+        .or_exit(Exit::Io)
+}
+
 fn main() -> ExitCode {
     let cli = match parse() {
         Ok(cli) => cli,
@@ -1901,6 +1994,21 @@ fn main() -> ExitCode {
             v,
             w,
         } => record(device.as_deref(), &out, sim, speed, seconds, (v, w)),
+        Cmd::Ros {
+            params,
+            sim,
+            device,
+            arm,
+            no_realtime,
+            check,
+        } => ros_node(&RosArgs {
+            params: params.as_deref(),
+            sim,
+            device,
+            arm,
+            realtime: !no_realtime,
+            check,
+        }),
         verb => board_verb(verb),
     };
     match r {

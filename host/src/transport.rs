@@ -43,6 +43,16 @@ pub trait Transport {
     fn name(&self) -> &str;
 }
 
+/// A boxed transport (`Box<dyn Transport + Send>`, as a thread takes it) is a transport.
+impl<T: Transport + ?Sized> Transport for Box<T> {
+    fn exchange(&mut self, tx: &[u8], rx: &mut [u8]) -> Result<(), LinkError> {
+        (**self).exchange(tx, rx)
+    }
+    fn name(&self) -> &str {
+        (**self).name()
+    }
+}
+
 /// Linux spidev master (`/dev/spidevB.C`), mode 0, 8-bit, MSB first.
 pub struct SpiTransport {
     dev: spidev::Spidev,

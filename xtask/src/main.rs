@@ -10,9 +10,13 @@
 //!
 //! `trace`: checks that `proofs/SAFETY.md`, `proofs/REPORT.md` and the harness code agree (see
 //! `trace`): one line per problem, non-zero exit if there is any.
+//!
+//! `ros-e2e`: `motorlink ros --sim` against Cyclone DDS's Python binding in a network namespace of
+//! its own (see `ros_e2e`).
 #![forbid(unsafe_code)]
 
 mod e2e;
+mod ros_e2e;
 mod trace;
 
 use std::fmt::Write as _;
@@ -145,6 +149,21 @@ fn main() -> ExitCode {
                 }
             }
         }
+        ["ros-e2e"] => {
+            let root = Path::new(env!("CARGO_MANIFEST_DIR"))
+                .parent()
+                .unwrap_or(Path::new("."));
+            match ros_e2e::run(root) {
+                Ok(summary) => {
+                    println!("{summary}");
+                    ExitCode::SUCCESS
+                }
+                Err(e) => {
+                    eprintln!("xtask ros-e2e: FAILED: {e}");
+                    ExitCode::FAILURE
+                }
+            }
+        }
         ["qemu-e2e", profile] => {
             let root = Path::new(env!("CARGO_MANIFEST_DIR"))
                 .parent()
@@ -162,7 +181,7 @@ fn main() -> ExitCode {
         }
         _ => {
             eprintln!(
-                "usage: cargo xtask kani-table <dir of `--output-into-files` results>\n       cargo xtask trace\n       cargo xtask qemu-e2e <cdc|teensy>"
+                "usage: cargo xtask kani-table <dir of `--output-into-files` results>\n       cargo xtask trace\n       cargo xtask qemu-e2e <cdc|teensy>\n       cargo xtask ros-e2e"
             );
             ExitCode::FAILURE
         }

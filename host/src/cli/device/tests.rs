@@ -132,9 +132,27 @@ fn drive_enable_sends_a_frame_first_then_the_enable_then_keeps_the_frames_coming
     assert_eq!(v, Verdict::Done);
     let pwm = frame(&cdc::Message::SetMotorPwm(plan.frame));
     let enable = frame(&cdc::Message::MotorEnable(true));
-    assert_eq!(written, [&pwm[..], &enable, &pwm, &pwm].concat());
+    // 0.03 s at 100 Hz plans 3 frames: the first, the enable after it, then the others. A loaded
+    // machine may skip a deadline (counted), never send more or change the order.
     let end = lines.last().unwrap();
-    assert_eq!(end["frames_sent"], 3);
+    let sent = end["frames_sent"].as_u64().unwrap();
+    let skipped = end["pacing"]["skipped"].as_u64().unwrap();
+    assert!(
+        (1..=3).contains(&sent),
+        "between 1 and the 3 planned frames: {sent}"
+    );
+    assert!(
+        sent + skipped >= 3,
+        "every planned frame sent or its deadline counted skipped"
+    );
+    let mut want = [&pwm[..], &enable].concat();
+    for _ in 1..sent {
+        want.extend_from_slice(&pwm);
+    }
+    assert_eq!(
+        written, want,
+        "the first frame, the enable, then the frames"
+    );
     assert_eq!(end["enable"]["reply"]["result"], 0);
     assert_eq!(lines[0]["sending"]["type"], "set_motor_pwm");
 }
