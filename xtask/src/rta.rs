@@ -619,7 +619,7 @@ pub fn analyse(
                 Some(hz) => (CPU_HZ.checked_div(hz).unwrap_or(1), format!("{hz} Hz")),
                 None if t.binds == "EXTI4" => (
                     ESTOP_MIN_INTERARRIVAL_US.saturating_mul(CPU_HZ / 1_000_000),
-                    "debounced edge (assumed)".into(),
+                    "debounced edge, assumed".into(),
                 ),
                 None => {
                     return Err(format!(
@@ -691,7 +691,7 @@ pub fn report(results: &[ImageResult]) -> String {
         "Computed by `cargo xtask rta` from the RTIC apps and `firmware/BUDGET.md`: {CPI} cycles per \
          instruction (an upper bound to be confirmed on the board), {IRQ_OVERHEAD_CYCLES} cycles of \
          interrupt entry and exit per run, at 168 MHz. C includes {RECORDS_PER_RUN} trace records per \
-         run of a task that steps the ladder; B is the longest critical section of a lower-priority \
+         run of a task that steps the ladder and BUDGET.md's polled waits; B is the longest critical section of a lower-priority \
          task on a resource with ceiling ≥ its priority (its whole handler run, less the largest body \
          it calls outside every lock; a defmt record blocks every task); R includes the tasks of \
          equal and higher priority."
@@ -936,6 +936,109 @@ mod tests {
         let new = replace_section(&doc, "new\n").unwrap();
         assert_eq!(new, format!("a\n{BEGIN}\nnew\n{END}\nz\n"));
         assert_eq!(section(&new), Some("\nnew\n"));
+    }
+
+    /// A three-task app: `high` (3) shares `a` with `low` (1); `watchdog_tick` (2) shares `b` with
+    /// `low`; `c` is `low`'s alone. `low` calls `body_fn` outside its lock.
+    const APP: &str = "
+    #[task(binds = EXTI4, priority = 3, shared = [a])]
+    fn high(cx: high::Context) { cx.shared.a.lock(|a| *a = 1); }
+    #[task(binds = TIM2, priority = 2, shared = [b])]
+    fn watchdog_tick(cx: watchdog_tick::Context) { cx.shared.b.lock(|b| *b = 1); }
+    #[task(binds = TIM3, priority = 1, shared = [a, b, c])]
+    fn low(cx: low::Context) { let x = m.body_fn(1); cx.shared.a.lock(|a| *a = x); }
+";
+
+    fn row(name: &str, sym: &str, prio: u8, rate: Option<u64>, n: u64) -> LoadRow {
+        LoadRow {
+            name: name.into(),
+            symbol: sym.into(),
+            priority: prio,
+            rate,
+            instructions: Some(Some(n)),
+            us: None,
+        }
+    }
+
+    fn budget(tick_instructions: u64) -> Budget {
+        Budget {
+            executed: vec![],
+            bodies: vec![("m::Low::body_fn".into(), "TIM3".into(), 1500)],
+            load: vec![
+                row("high", "EXTI4", 3, None, 100),
+                row("watchdog_tick", "TIM2", 2, Some(1000), tick_instructions),
+                row("low", "TIM3", 1, Some(100), 2000),
+            ],
+            frames: vec![],
+            trace_record: 0,
+        }
+    }
+
+    fn r_of(res: &ImageResult, name: &str) -> (u64, Result<u64, u64>) {
+        let (_, b, r) = res.rows.iter().find(|(j, _, _)| j.name == name).unwrap();
+        (*b, *r)
+    }
+
+    #[test]
+    fn an_app_is_analysed_under_srp() {
+        let tasks = parse_tasks(APP).unwrap();
+        let res = analyse("t", &tasks, &budget(1000), 14_583, Config::AMR_SPI).unwrap();
+        // `low`'s critical section: its 2000 instructions less the 1500 of `body_fn` (called
+        // outside the lock) = 500, × 3 = 1500 cycles; `high` is blocked through `a` (ceiling 3).
+        // C: high 100 × 3 + 48 = 348; tick 1000 × 3 + 48 = 3048; low 2000 × 3 + 48 = 6048.
+        assert_eq!(r_of(&res, "high"), (1500, Ok(348 + 1500)));
+        // The tick: B 1500 (through `b`, ceiling 2), one ESTOP run (period 168 000 cycles).
+        assert_eq!(r_of(&res, "watchdog_tick"), (1500, Ok(3048 + 1500 + 348)));
+        // `low`: no blocking; one run of each task above it.
+        assert_eq!(r_of(&res, "low"), (0, Ok(6048 + 3048 + 348)));
+        // Comm loss: 9 ms + 450 ns of crystal + R_tick 4896 cycles (29 143 ns, rounded up).
+        assert_eq!(res.comm_loss, Some((9, 10, 9_000_000 + 450 + 29_143, true)));
+        assert!(res.passes());
+    }
+
+    #[test]
+    fn an_unshared_resource_does_not_block() {
+        let app = APP.replace("shared = [a, b, c]", "shared = [c]");
+        let app = app.replace(
+            "cx.shared.a.lock(|a| *a = x)",
+            "cx.shared.c.lock(|c| *c = x)",
+        );
+        let tasks = parse_tasks(&app).unwrap();
+        let res = analyse("t", &tasks, &budget(1000), 14_583, Config::AMR_SPI).unwrap();
+        assert_eq!(r_of(&res, "high"), (0, Ok(348)));
+        assert_eq!(r_of(&res, "watchdog_tick").0, 0);
+    }
+
+    #[test]
+    fn a_body_called_inside_a_lock_stays_in_the_critical_section() {
+        let app = APP.replace(
+            "let x = m.body_fn(1); cx.shared.a.lock(|a| *a = x);",
+            "cx.shared.a.lock(|a| *a = m.body_fn(1));",
+        );
+        let tasks = parse_tasks(&app).unwrap();
+        let res = analyse("t", &tasks, &budget(1000), 14_583, Config::AMR_SPI).unwrap();
+        // The whole 2000 instructions: 6000 cycles.
+        assert_eq!(r_of(&res, "high").0, 6000);
+    }
+
+    #[test]
+    fn a_tick_over_its_period_fails_the_image() {
+        let tasks = parse_tasks(APP).unwrap();
+        // 60 000 instructions = 180 000 cycles > the 168 000-cycle period.
+        let res = analyse("t", &tasks, &budget(60_000), 14_583, Config::AMR_SPI).unwrap();
+        assert!(r_of(&res, "watchdog_tick").1.is_err());
+        assert_eq!(res.comm_loss, None);
+        assert!(!res.passes());
+        assert!(report(std::slice::from_ref(&res)).contains("**FAIL**"));
+    }
+
+    #[test]
+    fn a_task_missing_from_the_budget_is_an_error() {
+        let tasks = parse_tasks(APP).unwrap();
+        let mut b = budget(1000);
+        b.load.retain(|r| r.name != "low");
+        let e = analyse("t", &tasks, &b, 14_583, Config::AMR_SPI).unwrap_err();
+        assert!(e.contains("`low`"), "{e}");
     }
 
     #[test]
