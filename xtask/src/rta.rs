@@ -376,6 +376,69 @@ pub fn parse_budget(text: &str) -> Vec<(String, Budget)> {
     out
 }
 
+/// `CamelCase` as `snake_case`.
+fn snake(name: &str) -> String {
+    let mut out = String::new();
+    for (i, c) in name.chars().enumerate() {
+        if c.is_uppercase() && i > 0 {
+            out.push('_');
+        }
+        out.extend(c.to_lowercase());
+    }
+    out
+}
+
+/// True when `text` calls the function at `path`, recognised strictly: `a::module::func` as
+/// `module::func(` or a bare `func(`; `a::Type::method` as `Type::method(` or `recv.method(` where
+/// `recv` starts `Type`'s snake_case name (`tick.run(` for `TickTask::run`), so that a method of the
+/// same name on another value (`trace.tick(`) is not taken for it.
+pub fn calls(text: &str, path: &str) -> bool {
+    let mut seg = path.rsplit("::");
+    let Some(last) = seg.next() else {
+        return false;
+    };
+    let owner = seg.next().unwrap_or("");
+    if text.contains(&format!("{owner}::{last}(")) {
+        return true;
+    }
+    let ident = |c: char| c.is_alphanumeric() || c == '_';
+    let pat = format!("{last}(");
+    let is_type = owner.chars().next().is_some_and(char::is_uppercase);
+    let owner_snake = snake(owner);
+    text.match_indices(&pat).any(|(i, _)| {
+        let head = text.get(..i).unwrap_or("");
+        match head.chars().next_back() {
+            Some('.') if is_type => {
+                let recv: String = head
+                    .trim_end_matches('.')
+                    .chars()
+                    .rev()
+                    .take_while(|&c| ident(c))
+                    .collect::<Vec<_>>()
+                    .into_iter()
+                    .rev()
+                    .collect();
+                !recv.is_empty() && owner_snake.starts_with(&recv)
+            }
+            Some(c) => !(is_type || ident(c) || matches!(c, '.' | ':')),
+            None => !is_type,
+        }
+    })
+}
+
+/// True when `text` calls anything named like the function at `path` (`name(` after any
+/// character but a part of a longer name): the wide test for calls inside a lock.
+pub fn mentions(text: &str, path: &str) -> bool {
+    let last = path.rsplit("::").next().unwrap_or(path);
+    let pat = format!("{last}(");
+    text.match_indices(&pat).any(|(i, _)| {
+        !text
+            .get(..i)
+            .and_then(|h| h.chars().next_back())
+            .is_some_and(|c| c.is_alphanumeric() || c == '_')
+    })
+}
+
 /// A job class of the analysis, in CPU cycles.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Job {
@@ -552,10 +615,7 @@ pub fn analyse(
             .bodies
             .iter()
             .filter(|(_, h, _)| *h == t.binds)
-            .filter(|(p, _, _)| {
-                let method = format!("{}(", p.rsplit("::").next().unwrap_or(p));
-                t.body.contains(&method) && !t.locks.iter().any(|l| l.contains(&method))
-            })
+            .filter(|(p, _, _)| calls(&t.body, p) && !t.locks.iter().any(|l| mentions(l, p)))
             .map(|(_, _, n)| *n)
             .max()
             .unwrap_or(0);
@@ -939,14 +999,14 @@ mod tests {
     }
 
     /// A three-task app: `high` (3) shares `a` with `low` (1); `watchdog_tick` (2) shares `b` with
-    /// `low`; `c` is `low`'s alone. `low` calls `body_fn` outside its lock.
+    /// `low`; `c` is `low`'s alone. `low` calls `Low::body_fn` outside its lock.
     const APP: &str = "
     #[task(binds = EXTI4, priority = 3, shared = [a])]
     fn high(cx: high::Context) { cx.shared.a.lock(|a| *a = 1); }
     #[task(binds = TIM2, priority = 2, shared = [b])]
     fn watchdog_tick(cx: watchdog_tick::Context) { cx.shared.b.lock(|b| *b = 1); }
     #[task(binds = TIM3, priority = 1, shared = [a, b, c])]
-    fn low(cx: low::Context) { let x = m.body_fn(1); cx.shared.a.lock(|a| *a = x); }
+    fn low(cx: low::Context) { let x = low.body_fn(1); cx.shared.a.lock(|a| *a = x); }
 ";
 
     fn row(name: &str, sym: &str, prio: u8, rate: Option<u64>, n: u64) -> LoadRow {
@@ -1012,12 +1072,72 @@ mod tests {
     #[test]
     fn a_body_called_inside_a_lock_stays_in_the_critical_section() {
         let app = APP.replace(
-            "let x = m.body_fn(1); cx.shared.a.lock(|a| *a = x);",
-            "cx.shared.a.lock(|a| *a = m.body_fn(1));",
+            "let x = low.body_fn(1); cx.shared.a.lock(|a| *a = x);",
+            "cx.shared.a.lock(|a| *a = low.body_fn(1));",
         );
         let tasks = parse_tasks(&app).unwrap();
         let res = analyse("t", &tasks, &budget(1000), 14_583, Config::AMR_SPI).unwrap();
         // The whole 2000 instructions: 6000 cycles.
+        assert_eq!(r_of(&res, "high").0, 6000);
+    }
+
+    #[test]
+    fn a_same_named_call_outside_does_not_hide_a_body_called_in_a_lock() {
+        // `m::Joints::tick` runs inside `drive` (in the lock); the free function `serial::tick`
+        // outside the lock shares its last name only.
+        let app = APP.replace(
+            "let x = low.body_fn(1); cx.shared.a.lock(|a| *a = x);",
+            "let x = serial::tick(1); cx.shared.a.lock(|a| *a = drive(x));",
+        );
+        let tasks = parse_tasks(&app).unwrap();
+        let mut b = budget(1000);
+        b.bodies = vec![("m::Joints::tick".into(), "TIM3".into(), 1500)];
+        let res = analyse("t", &tasks, &b, 14_583, Config::AMR_SPI).unwrap();
+        assert_eq!(r_of(&res, "high").0, 6000);
+        // The free function itself is found outside the lock.
+        b.bodies = vec![("mcu::serial::tick".into(), "TIM3".into(), 1500)];
+        let res = analyse("t", &tasks, &b, 14_583, Config::AMR_SPI).unwrap();
+        assert_eq!(r_of(&res, "high").0, 1500);
+    }
+
+    #[test]
+    fn calls_are_recognised_by_path_and_receiver() {
+        assert!(calls(
+            "let o = cx.local.tick.run(safety, &i);",
+            "mcu::tick::TickTask::run"
+        ));
+        assert!(calls(
+            "cx.shared.link.on_frame(s)",
+            "mcu::link::LinkTask::on_frame"
+        ));
+        assert!(!calls(
+            "cx.local\n.trace\n.tick(t)",
+            "mcu::teensy::Joints::tick"
+        ));
+        assert!(calls(
+            "let out = mcu::serial::tick(safety, &i);",
+            "mcu::serial::tick"
+        ));
+        assert!(calls("let x = tick(1);", "mcu::serial::tick"));
+        assert!(!calls("let x = self.tick(1);", "mcu::serial::tick"));
+        assert!(mentions("(|a| a.tick(s))", "mcu::pi_spi::PiSpiApp::tick"));
+        assert!(!mentions(
+            "(|e| e.retick(s))",
+            "mcu::pi_spi::PiSpiApp::tick"
+        ));
+    }
+
+    #[test]
+    fn a_method_of_another_value_is_not_the_body() {
+        // `trace.tick(` outside the lock is not `Joints::tick`, which runs inside `drive`.
+        let app = APP.replace(
+            "let x = low.body_fn(1); cx.shared.a.lock(|a| *a = x);",
+            "cx.shared.a.lock(|a| *a = drive(1)); cx.local\n.trace\n.tick(2);",
+        );
+        let tasks = parse_tasks(&app).unwrap();
+        let mut b = budget(1000);
+        b.bodies = vec![("m::Joints::tick".into(), "TIM3".into(), 1500)];
+        let res = analyse("t", &tasks, &b, 14_583, Config::AMR_SPI).unwrap();
         assert_eq!(r_of(&res, "high").0, 6000);
     }
 
