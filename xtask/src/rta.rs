@@ -507,9 +507,15 @@ fn cycles(n: u64) -> u64 {
     n.saturating_mul(CPI)
 }
 
-/// Cycles as µs with one decimal.
+/// Cycles as µs with one decimal, rounded up (for times that must not be understated).
 fn us(c: u64) -> String {
     let tenths = c.saturating_mul(10).div_ceil(CPU_HZ / 1_000_000);
+    format!("{}.{}", tenths / 10, tenths % 10)
+}
+
+/// Cycles as µs with one decimal, rounded down (for periods and deadlines).
+fn us_down(c: u64) -> String {
+    let tenths = c.saturating_mul(10) / (CPU_HZ / 1_000_000);
     format!("{}.{}", tenths / 10, tenths % 10)
 }
 
@@ -524,6 +530,9 @@ pub struct ImageResult {
     pub notes: Vec<String>,
     /// The comm-loss line's verdict: (b, bound ms, braked-by in ns, ok).
     pub comm_loss: Option<(u16, u16, u64, bool)>,
+    /// A serial link's byte reception, informational: (latency from a byte's arrival to its read,
+    /// cycles, or `None` past a second; one byte time, cycles).
+    pub byte_read: Option<(Option<u64>, u64)>,
 }
 
 impl ImageResult {
@@ -545,6 +554,8 @@ pub fn analyse(
     let mut jobs: Vec<Job> = Vec::new();
     let mut holders: Vec<Holder> = Vec::new();
     let mut notes = Vec::new();
+    // A serial link task: (name, priority, its longest single run, its entry up to the read).
+    let mut serial: Option<(String, u8, u64, u64)> = None;
     let ceiling = |r: &str| {
         tasks
             .iter()
@@ -642,6 +653,19 @@ pub fn analyse(
             .iter()
             .any(|r| r.name == format!("{}, receive", t.name));
         if receive {
+            let entry = budget
+                .executed
+                .iter()
+                .filter(|(s, _)| *s == t.binds)
+                .map(|(_, n)| *n)
+                .min()
+                .unwrap_or(0);
+            serial = Some((
+                t.name.clone(),
+                t.priority,
+                cycles(run_max.saturating_add(records)).saturating_add(IRQ_OVERHEAD_CYCLES),
+                cycles(entry).saturating_add(IRQ_OVERHEAD_CYCLES),
+            ));
             let min_bytes = budget.frames.iter().map(|f| f.0).min().unwrap_or(1);
             let max_bytes = budget.frames.iter().map(|f| f.0).max().unwrap_or(1);
             let per_frame = budget.frames.iter().map(|f| f.1).max().unwrap_or(0);
@@ -719,6 +743,30 @@ pub fn analyse(
         rows.push((j.clone(), b, r));
     }
     rows.sort_by_key(|r| std::cmp::Reverse(r.0.priority));
+    // A received byte waits in the data register until the link handler reads it: behind one
+    // run of a task of its priority (they do not preempt each other: its own previous byte, or
+    // another task's run), one blocking section, and the tasks above it. The next byte overruns it
+    // one byte time after its arrival.
+    let byte_read = serial.map(|(name, prio, own, entry)| {
+        let prefix = format!("{name}, ");
+        let np = jobs
+            .iter()
+            .filter(|j| j.priority == prio && !j.name.starts_with(&prefix))
+            .map(|j| j.c)
+            .fold(own, u64::max);
+        let hp: Vec<(u64, u64)> = jobs
+            .iter()
+            .filter(|j| j.priority > prio)
+            .map(|j| (j.c, j.period))
+            .collect();
+        let l = response_time(
+            np.saturating_add(entry),
+            blocking(prio, &holders),
+            &hp,
+            CPU_HZ,
+        );
+        (l.ok(), byte_cycles)
+    });
     // Comm loss: the b-th tick at most b ms (± crystal) after t0, braked R_tick after it.
     let p = config.params();
     let b = p.brake_after;
@@ -740,6 +788,7 @@ pub fn analyse(
         rows,
         notes,
         comm_loss,
+        byte_read,
     })
 }
 
@@ -769,13 +818,13 @@ pub fn report(results: &[ImageResult]) -> String {
             };
             let deadline = j
                 .deadline
-                .map_or("– (a late run delays the next byte only)".into(), us);
+                .map_or("– (a late run delays the next byte only)".into(), us_down);
             let _ = writeln!(
                 out,
                 "| `{}` | {} | {} µs ({}) | {} → {} | {} | {} | {} | {} |",
                 j.name,
                 j.priority,
-                us(j.period),
+                us_down(j.period),
                 j.period_note,
                 j.instructions,
                 us(j.c),
@@ -806,6 +855,21 @@ pub fn report(results: &[ImageResult]) -> String {
             None => {
                 let _ = writeln!(out, "\nComm loss: **FAIL** (the tick misses its deadline).");
             }
+        }
+        if let Some((l, byte)) = r.byte_read {
+            let verdict = match l {
+                Some(l) if l < byte => "no receive overrun".to_string(),
+                Some(_) => "an overrun is possible (the next byte completes first)".to_string(),
+                None => "no bound".to_string(),
+            };
+            let _ = writeln!(
+                out,
+                "\nByte reception (informational, not a pass condition): a received byte is read at most {} µs \
+                 after its arrival, against one byte time of {} µs: {verdict}. A lost byte fails its \
+                 frame's CRC and the frame is refused (availability, not safety).",
+                l.map_or("–".to_string(), us),
+                us_down(byte)
+            );
         }
     }
     out
@@ -894,6 +958,18 @@ mod tests {
         assert_eq!(response_time(1, 0, &[], 4), Ok(1));
         assert_eq!(response_time(2, 0, &[(1, 4)], 6), Ok(3));
         assert_eq!(response_time(3, 0, &[(1, 4), (2, 6)], 13), Ok(10));
+    }
+
+    #[test]
+    fn burns_and_wellings_example() {
+        // Burns & Wellings, "Real-Time Systems and Programming Languages", the response-time
+        // example: a (T 7, C 3), b (T 12, C 3), c (T 20, C 5). R_a = 3, R_b = 3 + 3 = 6,
+        // R_c: 5 → 11 → 14 → 17 → 20 → 20, exactly its deadline.
+        assert_eq!(response_time(3, 0, &[], 7), Ok(3));
+        assert_eq!(response_time(3, 0, &[(3, 7)], 12), Ok(6));
+        assert_eq!(response_time(5, 0, &[(3, 7), (3, 12)], 20), Ok(20));
+        // One cycle less of deadline and it is missed: the iterate 20 exceeds 19.
+        assert_eq!(response_time(5, 0, &[(3, 7), (3, 12)], 19), Err(20));
     }
 
     #[test]
@@ -1051,6 +1127,8 @@ mod tests {
         assert_eq!(r_of(&res, "watchdog_tick"), (1500, Ok(3048 + 1500 + 348)));
         // `low`: no blocking; one run of each task above it.
         assert_eq!(r_of(&res, "low"), (0, Ok(6048 + 3048 + 348)));
+        // No serial link here.
+        assert_eq!(res.byte_read, None);
         // Comm loss: 9 ms + 450 ns of crystal + R_tick 4896 cycles (29 143 ns, rounded up).
         assert_eq!(res.comm_loss, Some((9, 10, 9_000_000 + 450 + 29_143, true)));
         assert!(res.passes());
