@@ -19,7 +19,10 @@
 //! - **Critical sections**: BUDGET.md has no per-lock figures, so a task's critical section on any
 //!   resource is bounded by its whole handler run, less the largest board-application body (the
 //!   "Board-application bodies inside their handlers" table) that the handler calls directly and
-//!   outside every lock closure. A defmt log record (a trace record, or a `defmt::` log in the
+//!   outside every lock closure ([`calls`], [`mentions`]). The body's figure is from the handler's
+//!   worst sampled call, so what is left is that call's code outside the body: the handler's own
+//!   loop-free code, its lock closures among it. Trace records stay in it when a lock closure is
+//!   handed the ladder (`safety`). A defmt log record (a trace record, or a `defmt::` log in the
 //!   handler) runs with interrupts disabled: a pseudo-resource whose ceiling is above every task.
 //! - **Comm-loss thresholds** from `statemachine::Config::PROFILES`.
 //!
@@ -1055,6 +1058,38 @@ mod tests {
         let f = parse_load_row("| imu_read: fusion `ImuFusion::update` (`UART4`) | 1 | each run | 100 | ? | | | | no |")
             .unwrap();
         assert_eq!((f.symbol.as_str(), f.instructions), ("UART4", Some(None)));
+    }
+
+    #[test]
+    fn budget_sections_split_by_image() {
+        let text = "\
+| unit | symbol | instructions | own stack, bytes |
+|---|---|---|---|
+| tick | `TIM2` | 10 / 20 | 8 |
+| trace: one record | `mcu::trace::Trace::push` | 5 / 7 | 8 |
+
+## Image `cdc` (seed 001)
+
+| body | handler | instructions |
+|---|---|---|
+| `mcu::serial::tick` | `TIM2` | 479 |
+
+| frame | counted | bytes | each byte before the last | the last byte | **per frame** |
+|---|---|---|---|---|---|
+| PING | link body | 6 | 143–253 | 1308 | **2288** |
+";
+        let b = parse_budget(text);
+        assert_eq!(b.len(), 2);
+        assert_eq!(b[0].0, "amr-spi");
+        assert_eq!(b[0].1.executed[0], ("TIM2".to_string(), 20));
+        assert_eq!(b[0].1.trace_record, 7);
+        assert_eq!(b[1].0, "cdc");
+        assert_eq!(
+            b[1].1.bodies,
+            [("mcu::serial::tick".to_string(), "TIM2".to_string(), 479)]
+        );
+        assert_eq!(b[1].1.frames, [(6, 2288)]);
+        assert!(b[1].1.executed.is_empty());
     }
 
     #[test]
