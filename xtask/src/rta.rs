@@ -567,6 +567,17 @@ pub fn analyse(
             .max()
             .unwrap_or(0)
     };
+    if let Some(r) = budget
+        .load
+        .iter()
+        .find(|r| !tasks.iter().any(|t| t.binds == r.symbol))
+    {
+        return Err(format!(
+            "{image}: BUDGET.md's load table has `{}` (`{}`), which no task of the app binds \
+             (regenerate BUDGET.md)",
+            r.name, r.symbol
+        ));
+    }
     for t in tasks {
         let rows: Vec<&LoadRow> = budget.load.iter().filter(|r| r.symbol == t.binds).collect();
         if rows.is_empty() {
@@ -1263,6 +1274,22 @@ mod tests {
         assert_eq!(res.comm_loss, None);
         assert!(!res.passes());
         assert!(report(std::slice::from_ref(&res)).contains("**FAIL**"));
+    }
+
+    #[test]
+    fn a_stale_budget_is_an_error() {
+        let tasks = parse_tasks(APP).unwrap();
+        let mut b = budget(1000);
+        b.load.push(row("gone", "TIM9", 2, Some(10), 5));
+        let e = analyse("t", &tasks, &b, 14_583, Config::AMR_SPI).unwrap_err();
+        assert!(e.contains("`TIM9`"), "{e}");
+        let mut b = budget(1000);
+        b.load[1].priority = 3;
+        let e = analyse("t", &tasks, &b, 14_583, Config::AMR_SPI).unwrap_err();
+        assert!(
+            e.contains("priority 2 in the source, 3 in BUDGET.md"),
+            "{e}"
+        );
     }
 
     #[test]
