@@ -17,6 +17,7 @@
 
 mod e2e;
 mod ros_e2e;
+mod rta;
 mod trace;
 
 use std::fmt::Write as _;
@@ -109,6 +110,92 @@ fn kani_table(dir: &Path) -> Result<String, String> {
     Ok(table(&rows))
 }
 
+/// `cargo xtask rta [--check [FILE] | --write [FILE]]`: prints the response-time analysis of every
+/// firmware image (exit status 1 when a task misses its deadline or a comm-loss bound is not met);
+/// `--check` also fails when FILE's (default `proofs/SAFETY.md`) generated section differs from it,
+/// `--write` regenerates that section.
+fn rta_main(args: &[&str]) -> ExitCode {
+    let root = Path::new(env!("CARGO_MANIFEST_DIR"))
+        .parent()
+        .unwrap_or(Path::new("."));
+    let (mode, file) = match args {
+        [] => ("print", None),
+        ["--check"] | ["--write"] => (args.first().copied().unwrap_or(""), None),
+        [m @ ("--check" | "--write"), f] => (*m, Some(*f)),
+        ["--help" | "-h"] => {
+            println!(
+                "cargo xtask rta [--check [FILE] | --write [FILE]]\n\n\
+                 Response-time analysis of every firmware image's RTIC tasks under the stack resource\n\
+                 policy, from the RTIC apps' #[task] attributes and lock sites and firmware/BUDGET.md's\n\
+                 instruction counts and rates, and the comm-loss bound per link profile in wall time.\n\
+                 Prints one Markdown table per image; exits 1 when a task's response time exceeds its\n\
+                 deadline or a comm-loss bound is not met.\n\n\
+                 --check [FILE]  also fail unless FILE's (default proofs/SAFETY.md) section between\n\
+                 \x20               the rta:begin and rta:end markers equals the printed report\n\
+                 --write [FILE]  rewrite that section with the report"
+            );
+            return ExitCode::SUCCESS;
+        }
+        _ => {
+            eprintln!("usage: cargo xtask rta [--check [FILE] | --write [FILE]] (see --help)");
+            return ExitCode::from(64);
+        }
+    };
+    let results = match rta::run(root) {
+        Ok(r) => r,
+        Err(e) => {
+            eprintln!("xtask rta: {e}");
+            return ExitCode::FAILURE;
+        }
+    };
+    let report = rta::report(&results);
+    print!("{report}");
+    let mut ok = results.iter().all(rta::ImageResult::passes);
+    if !ok {
+        eprintln!("xtask rta: a task misses its deadline or a comm-loss bound is not met");
+    }
+    if mode != "print" {
+        let path = file.map_or_else(|| root.join("proofs/SAFETY.md"), std::path::PathBuf::from);
+        let doc = match std::fs::read_to_string(&path) {
+            Ok(d) => d,
+            Err(e) => {
+                eprintln!("xtask rta: {}: {e}", path.display());
+                return ExitCode::FAILURE;
+            }
+        };
+        let body = rta::section_body(&report);
+        if mode == "--write" {
+            match rta::replace_section(&doc, &body) {
+                Ok(new) => {
+                    if let Err(e) = std::fs::write(&path, new) {
+                        eprintln!("xtask rta: {}: {e}", path.display());
+                        return ExitCode::FAILURE;
+                    }
+                    eprintln!("xtask rta: wrote {}", path.display());
+                }
+                Err(e) => {
+                    eprintln!("xtask rta: {}: {e}", path.display());
+                    return ExitCode::FAILURE;
+                }
+            }
+        } else {
+            let current = rta::section(&doc).map(|s| s.strip_prefix('\n').unwrap_or(s));
+            if current != Some(body.as_str()) {
+                eprintln!(
+                    "xtask rta: {}'s generated section is missing or stale: run `cargo xtask rta --write`",
+                    path.display()
+                );
+                ok = false;
+            }
+        }
+    }
+    if ok {
+        ExitCode::SUCCESS
+    } else {
+        ExitCode::FAILURE
+    }
+}
+
 fn main() -> ExitCode {
     let args: Vec<String> = std::env::args().skip(1).collect();
     match args
@@ -164,6 +251,7 @@ fn main() -> ExitCode {
                 }
             }
         }
+        ["rta", rest @ ..] => rta_main(rest),
         ["qemu-e2e", profile] => {
             let root = Path::new(env!("CARGO_MANIFEST_DIR"))
                 .parent()
@@ -181,7 +269,7 @@ fn main() -> ExitCode {
         }
         _ => {
             eprintln!(
-                "usage: cargo xtask kani-table <dir of `--output-into-files` results>\n       cargo xtask trace\n       cargo xtask qemu-e2e <cdc|teensy>\n       cargo xtask ros-e2e"
+                "usage: cargo xtask kani-table <dir of `--output-into-files` results>\n       cargo xtask trace\n       cargo xtask rta [--check [FILE] | --write [FILE]]\n       cargo xtask qemu-e2e <cdc|teensy>\n       cargo xtask ros-e2e"
             );
             ExitCode::FAILURE
         }
