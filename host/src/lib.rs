@@ -12,6 +12,7 @@ pub mod feedback;
 pub mod kinematics;
 pub mod link;
 pub mod loopstats;
+pub mod names;
 pub mod pacing;
 pub mod record;
 pub mod ros;

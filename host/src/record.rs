@@ -31,7 +31,7 @@ use std::io::{BufWriter, Write};
 use std::path::{Path, PathBuf};
 
 use protocol::amr::{self, McuFrame, MotorCommand, MotorFeedback, FRAME_LEN};
-use statemachine::{FaultFlags, Mode};
+use statemachine::Mode;
 
 use crate::bridge::{ArmState, Bridge, BridgeStats, Diagnostic};
 use crate::kinematics::DiffDrive;
@@ -121,52 +121,12 @@ impl Default for RecordConfig {
     }
 }
 
-/// Names of the fault flags, in bit order.
-pub const FAULT_NAMES: [(FaultFlags, &str); 12] = [
-    (FaultFlags::OVERCURRENT, "OVERCURRENT"),
-    (FaultFlags::OVERTEMPERATURE, "OVERTEMPERATURE"),
-    (FaultFlags::ENCODER, "ENCODER"),
-    (FaultFlags::UNDERVOLTAGE, "UNDERVOLTAGE"),
-    (FaultFlags::COMM_LOST, "COMM_LOST"),
-    (FaultFlags::ESTOP, "ESTOP"),
-    (FaultFlags::SHUTDOWN, "SHUTDOWN"),
-    (FaultFlags::THERMAL_WARNING, "THERMAL_WARNING"),
-    (FaultFlags::CLOCK_SYNC_LOST, "CLOCK_SYNC_LOST"),
-    (FaultFlags::BRAKE_LATCHED, "BRAKE_LATCHED"),
-    (FaultFlags::POWER_ON, "POWER_ON"),
-    (FaultFlags::LINK_DEGRADED, "LINK_DEGRADED"),
-];
-
 /// The names of the flags set in `bits`, joined by `|` (`""` for none; an unknown bit as `BIT<n>`).
 pub fn fault_names(bits: u32) -> String {
-    let mut names: Vec<String> = Vec::new();
-    for n in 0..32u32 {
-        let Some(bit) = 1u32.checked_shl(n) else {
-            continue;
-        };
-        if bits & bit == 0 {
-            continue;
-        }
-        let known = FAULT_NAMES
-            .iter()
-            .find(|(f, _)| u32::from(f.0) == bit)
-            .map(|(_, name)| (*name).to_string());
-        names.push(known.unwrap_or_else(|| format!("BIT{n}")));
-    }
-    names.join("|")
+    crate::names::fault_names(bits).join("|")
 }
 
-/// A mode number as its name.
-pub fn mode_name(mode: u32) -> &'static str {
-    match mode {
-        m if m == Mode::Normal as u32 => "NORMAL",
-        m if m == Mode::Reduced as u32 => "REDUCED",
-        m if m == Mode::Hold as u32 => "HOLD",
-        m if m == Mode::Stop as u32 => "STOP",
-        m if m == Mode::Brake as u32 => "BRAKE",
-        _ => "UNKNOWN",
-    }
-}
+pub use crate::names::mode_name;
 
 /// Pose from the encoder counts of successive feedback frames (midpoint integration).
 #[derive(Clone, Copy, Debug, PartialEq)]

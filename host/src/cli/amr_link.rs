@@ -210,52 +210,7 @@ impl<T: Transport> Port for Paced<T> {
     }
 }
 
-/// The ladder rung's name (feedback `mode`).
-pub fn mode_name(mode: u32) -> &'static str {
-    match mode {
-        m if m == Mode::Normal as u32 => "NORMAL",
-        m if m == Mode::Reduced as u32 => "REDUCED",
-        m if m == Mode::Hold as u32 => "HOLD",
-        m if m == Mode::Stop as u32 => "STOP",
-        m if m == Mode::Brake as u32 => "BRAKE",
-        _ => "UNKNOWN",
-    }
-}
-
-/// Every fault flag with its name, in bit order.
-pub const FAULT_NAMES: [(FaultFlags, &str); 12] = [
-    (FaultFlags::OVERCURRENT, "OVERCURRENT"),
-    (FaultFlags::OVERTEMPERATURE, "OVERTEMPERATURE"),
-    (FaultFlags::ENCODER, "ENCODER"),
-    (FaultFlags::UNDERVOLTAGE, "UNDERVOLTAGE"),
-    (FaultFlags::COMM_LOST, "COMM_LOST"),
-    (FaultFlags::ESTOP, "ESTOP"),
-    (FaultFlags::SHUTDOWN, "SHUTDOWN"),
-    (FaultFlags::THERMAL_WARNING, "THERMAL_WARNING"),
-    (FaultFlags::CLOCK_SYNC_LOST, "CLOCK_SYNC_LOST"),
-    (FaultFlags::BRAKE_LATCHED, "BRAKE_LATCHED"),
-    (FaultFlags::POWER_ON, "POWER_ON"),
-    (FaultFlags::LINK_DEGRADED, "LINK_DEGRADED"),
-];
-
-/// The names of the flags set in a feedback's `fault_flags` (an unknown bit as `BIT<n>`).
-pub fn fault_names(flags: u32) -> Vec<String> {
-    let mut names = Vec::new();
-    for bit in 0..32u32 {
-        let Some(mask) = 1u32.checked_shl(bit) else {
-            continue;
-        };
-        if flags & mask == 0 {
-            continue;
-        }
-        let known = FAULT_NAMES
-            .iter()
-            .find(|(f, _)| u32::from(f.0) == mask)
-            .map(|(_, n)| (*n).to_string());
-        names.push(known.unwrap_or_else(|| format!("BIT{bit}")));
-    }
-    names
-}
+pub use crate::names::{fault_names, mode_name, FAULT_NAMES};
 
 /// One feedback as the verbs show it.
 #[derive(Clone, Debug, PartialEq, Serialize)]

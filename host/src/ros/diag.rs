@@ -1,66 +1,24 @@
 //! The node's `diagnostic_msgs/DiagnosticStatus`: the MCU's ladder rung and fault flags by name,
 //! the bridge's arming state and cmd_vel age, the link counters and the clock-sync state.
 
-use statemachine::{FaultFlags, Mode};
+use statemachine::Mode;
 
 use super::msg::{level, DiagnosticStatus, KeyValue};
 use super::shared::Snapshot;
 use crate::bridge::ArmState;
 
-/// Every fault flag with its name, in bit order.
-pub const FAULT_NAMES: [(FaultFlags, &str); 12] = [
-    (FaultFlags::OVERCURRENT, "overcurrent"),
-    (FaultFlags::OVERTEMPERATURE, "overtemperature"),
-    (FaultFlags::ENCODER, "encoder"),
-    (FaultFlags::UNDERVOLTAGE, "undervoltage"),
-    (FaultFlags::COMM_LOST, "comm_lost"),
-    (FaultFlags::ESTOP, "estop"),
-    (FaultFlags::SHUTDOWN, "shutdown"),
-    (FaultFlags::THERMAL_WARNING, "thermal_warning"),
-    (FaultFlags::CLOCK_SYNC_LOST, "clock_sync_lost"),
-    (FaultFlags::BRAKE_LATCHED, "brake_latched"),
-    (FaultFlags::POWER_ON, "power_on"),
-    (FaultFlags::LINK_DEGRADED, "link_degraded"),
-];
-
-/// The names of the flags set in `bits`, comma-separated ("none" if none; an undefined bit as
-/// `bit<n>`).
+/// The names of the flags set in `bits`, lower case and comma-separated ("none" if none; an
+/// undefined bit as `bit<n>`).
 pub fn fault_names(bits: u32) -> String {
-    let mut names: Vec<String> = Vec::new();
-    for n in 0..32u32 {
-        let Some(bit) = 1u32.checked_shl(n) else {
-            continue;
-        };
-        if bits & bit == 0 {
-            continue;
-        }
-        let known = FAULT_NAMES
-            .iter()
-            .find(|(f, _)| u32::from(f.0) == bit)
-            .map(|(_, name)| (*name).to_string());
-        names.push(known.unwrap_or_else(|| format!("bit{n}")));
-    }
+    let names = crate::names::fault_names(bits);
     if names.is_empty() {
         "none".into()
     } else {
-        names.join(",")
+        names.join(",").to_lowercase()
     }
 }
 
-/// The name of ladder rung `mode` (`Mode as u8`).
-pub fn mode_name(mode: u32) -> &'static str {
-    const RUNGS: [(Mode, &str); 5] = [
-        (Mode::Normal, "NORMAL"),
-        (Mode::Reduced, "REDUCED"),
-        (Mode::Hold, "HOLD"),
-        (Mode::Stop, "STOP"),
-        (Mode::Brake, "BRAKE"),
-    ];
-    RUNGS
-        .iter()
-        .find(|(m, _)| u32::from(*m as u8) == mode)
-        .map_or("UNKNOWN", |(_, n)| n)
-}
+pub use crate::names::mode_name;
 
 /// The name of an arming state.
 pub fn arm_name(a: Option<ArmState>) -> &'static str {
@@ -185,6 +143,7 @@ pub fn status(s: &Snapshot, hardware_id: &str, recent: &[&str]) -> DiagnosticSta
 mod tests {
     use super::*;
     use protocol::amr::MotorFeedback;
+    use statemachine::FaultFlags;
 
     #[test]
     fn flags_are_named_by_bit() {
@@ -192,13 +151,6 @@ mod tests {
         // Bit 4 comm lost, bit 9 brake latched (statemachine::FaultFlags).
         assert_eq!(fault_names((1 << 4) | (1 << 9)), "comm_lost,brake_latched");
         assert_eq!(fault_names(1 << 15), "bit15");
-        // Every named flag is one distinct bit.
-        let mut all = 0u16;
-        for (f, _) in FAULT_NAMES {
-            assert_eq!(f.0.count_ones(), 1);
-            assert_eq!(all & f.0, 0);
-            all |= f.0;
-        }
     }
 
     #[test]
