@@ -856,12 +856,11 @@ pub fn arm<P: Port>(
     verb: &'static str,
     stop: &mut dyn FnMut() -> bool,
 ) -> Result<Report, LinkError> {
-    s.bridge.disarm();
-    let before = first_feedback(s, WAIT_MS, stop)?;
-    let Some(b) = before else {
-        let r = Report::new(verb, s, None, Outcome::NoReply, no_feedback(s));
-        return Ok(r);
+    let b = match begin(s, verb, stop)? {
+        Ok(b) => b,
+        Err(r) => return Ok(r),
     };
+    let before = Some(b);
     if verb == "rearm" && b.mode != Mode::Brake as u32 {
         let msg = format!(
             "the MCU is in {}, not BRAKE: no latch to clear",
@@ -915,6 +914,20 @@ fn no_feedback<P: Port>(s: &Session<P>) -> String {
     )
 }
 
+/// The start of `arm`, `rearm`, `disarm` and `drive`: enable 0, then the first valid feedback
+/// within [`WAIT_MS`]; without one the verb's report is a no-reply (`Err`).
+fn begin<P: Port>(
+    s: &mut Session<P>,
+    verb: &'static str,
+    stop: &mut dyn FnMut() -> bool,
+) -> Result<Result<MotorFeedback, Report>, LinkError> {
+    s.bridge.disarm();
+    Ok(match first_feedback(s, WAIT_MS, stop)? {
+        Some(f) => Ok(f),
+        None => Err(Report::new(verb, s, None, Outcome::NoReply, no_feedback(s))),
+    })
+}
+
 /// `disarm`: enable 0 (the ladder's STOP: zero speed under the speed loop, bounded deceleration)
 /// for `seconds`, or until the wheels stand; report the MCU's mode and wheel speeds.
 pub fn disarm<P: Port>(
@@ -922,17 +935,10 @@ pub fn disarm<P: Port>(
     seconds: f64,
     stop: &mut dyn FnMut() -> bool,
 ) -> Result<Report, LinkError> {
-    s.bridge.disarm();
-    let before = first_feedback(s, WAIT_MS, stop)?;
-    if before.is_none() {
-        return Ok(Report::new(
-            "disarm",
-            s,
-            None,
-            Outcome::NoReply,
-            no_feedback(s),
-        ));
-    }
+    let before = match begin(s, "disarm", stop)? {
+        Ok(b) => Some(b),
+        Err(r) => return Ok(r),
+    };
     let cycles = cycles_of(seconds);
     let mut stood = false;
     let mut interrupted = false;
@@ -1068,17 +1074,10 @@ pub fn drive<P: Port>(
     seconds: f64,
     stop: &mut dyn FnMut() -> bool,
 ) -> Result<Report, LinkError> {
-    s.bridge.disarm();
-    let before = first_feedback(s, WAIT_MS, stop)?;
-    if before.is_none() {
-        return Ok(Report::new(
-            "drive",
-            s,
-            None,
-            Outcome::NoReply,
-            no_feedback(s),
-        ));
-    }
+    let before = match begin(s, "drive", stop)? {
+        Ok(b) => Some(b),
+        Err(r) => return Ok(r),
+    };
     let armed = s.arm_and_wait(WAIT_MS, stop)?;
     if armed != ArmResult::Armed {
         let flags = s.feedback().map_or(0, |f| f.fault_flags);
