@@ -152,6 +152,10 @@ fn config(b: &mut Bytes) -> Config {
     Config::new(p).unwrap_or(base)
 }
 
+/// Events after which the ladder was on each rung (`Mode as usize`), and re-arms that released BRAKE.
+static RUNGS: [AtomicU64; 5] = [const { AtomicU64::new(0) }; 5];
+static RELEASES: AtomicU64 = AtomicU64::new(0);
+
 /// Runs one input through the ladder and the model; returns the number of events.
 fn run<const N: usize>(cfg: Config, b: &mut Bytes) -> u64 {
     let mut ladder = Ladder::<N>::new(cfg);
@@ -167,9 +171,11 @@ fn run<const N: usize>(cfg: Config, b: &mut Bytes) -> u64 {
     while !b.is_empty() {
         for e in event::<N>(b, &mut g) {
             step_both(&mut ladder, &mut model, e);
+            RUNGS[ladder.mode() as usize].fetch_add(1, Ordering::Relaxed);
             n += 1;
         }
     }
+    RELEASES.fetch_add(u64::from(ladder.counters().rearms), Ordering::Relaxed);
     n
 }
 
@@ -191,9 +197,18 @@ fn fuzz_ladder_against_model() {
             };
             EVENTS.fetch_add(n, Ordering::Relaxed);
         });
+    let rungs = RUNGS.each_ref().map(|r| r.load(Ordering::Relaxed));
     eprintln!(
-        "fuzz ladder_against_model: {} executions, {} events, no disagreement",
+        "fuzz ladder_against_model: {} executions, {} events, no disagreement; events on NORMAL, \
+         REDUCED, HOLD, STOP, BRAKE: {rungs:?}; re-arms that released BRAKE: {}",
         N.load(Ordering::Relaxed),
-        EVENTS.load(Ordering::Relaxed)
+        EVENTS.load(Ordering::Relaxed),
+        RELEASES.load(Ordering::Relaxed),
     );
+    // Not vacuous: the inputs leave BRAKE and reach every rung.
+    assert!(
+        rungs.iter().all(|&r| r > 0),
+        "a rung never reached: {rungs:?}"
+    );
+    assert!(RELEASES.load(Ordering::Relaxed) > 0);
 }

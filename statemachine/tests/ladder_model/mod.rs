@@ -181,11 +181,7 @@ impl<const N: usize> Model<N> {
                 // since the last valid frame. Reading: `max_cmd_step` per tick, and one tick's worth
                 // for a second frame within the same tick.
                 let ticks = i32::from(self.age.max(1));
-                let allowance = self
-                    .cfg
-                    .params()
-                    .max_cmd_step
-                    .saturating_mul_int(ticks);
+                let allowance = self.cfg.params().max_cmd_step.saturating_mul_int(ticks);
                 match validate(&cmd, self.last.as_ref(), allowance, &self.cfg) {
                     Ok(sp) => {
                         // SR-1: a valid frame restarts the age and sets its own threshold.
@@ -379,7 +375,12 @@ fn check<const N: usize>(
     out: &statemachine::Output<N>,
 ) {
     let p = *model.cfg.params();
-    let ctx = || format!("after {event:?}\nmodel {model:?}\nladder before {:?}\nladder {ladder:?}", before.ladder);
+    let ctx = || {
+        format!(
+            "after {event:?}\nmodel {model:?}\nladder before {:?}\nladder {ladder:?}",
+            before.ladder
+        )
+    };
     let is_tick = matches!(event, Event::Tick);
 
     // The rung, BRAKE and its drive (§1, SR-6, SR-8, SR-9, SR-10, INV-7).
@@ -407,7 +408,12 @@ fn check<const N: usize>(
     // SR-8: the command held.
     assert_eq!(ladder.last_valid(), model.last, "last valid {}", ctx());
     // SR-14: the ESTOP holders and refused releases.
-    assert_eq!(ladder.estop_owners(), model.estop_owners, "owners {}", ctx());
+    assert_eq!(
+        ladder.estop_owners(),
+        model.estop_owners,
+        "owners {}",
+        ctx()
+    );
     assert_eq!(
         ladder.counters().estop_release_refused,
         model.estop_release_refused,
@@ -429,21 +435,47 @@ fn check<const N: usize>(
         _ => false,
     };
     if refused {
-        assert_eq!(ladder.mode(), before.mode, "refused frame moved the rung {}", ctx());
-        assert_eq!(ladder.applied(), before.applied, "refused frame moved a value {}", ctx());
+        assert_eq!(
+            ladder.mode(),
+            before.mode,
+            "refused frame moved the rung {}",
+            ctx()
+        );
+        assert_eq!(
+            ladder.applied(),
+            before.applied,
+            "refused frame moved a value {}",
+            ctx()
+        );
         assert_eq!(ladder.axis_modes(), before.axis_modes, "{}", ctx());
         assert_eq!(ladder.age(), before.ladder.age(), "{}", ctx());
-        assert_eq!(ladder.brake_after(), before.ladder.brake_after(), "{}", ctx());
+        assert_eq!(
+            ladder.brake_after(),
+            before.ladder.brake_after(),
+            "{}",
+            ctx()
+        );
         assert_eq!(ladder.last_valid(), before.ladder.last_valid(), "{}", ctx());
-        assert_eq!(ladder.output().drive, before.ladder.output().drive, "{}", ctx());
+        assert_eq!(
+            ladder.output().drive,
+            before.ladder.output().drive,
+            "{}",
+            ctx()
+        );
     }
 
     // LINK_DEGRADED against §1's REDUCED rules (the flag is meaningful outside BRAKE).
     if is_tick && !model.latched {
-        if model.degrading_active() || mb.latched || model.strikes.len() >= usize::from(p.strike_limit)
-            && mb.strikes_since_tick >= u32::from(p.strike_limit)
+        if model.degrading_active()
+            || mb.latched
+            || model.strikes.len() >= usize::from(p.strike_limit)
+                && mb.strikes_since_tick >= u32::from(p.strike_limit)
         {
-            assert!(degraded_of(out), "REDUCED cause without LINK_DEGRADED {}", ctx());
+            assert!(
+                degraded_of(out),
+                "REDUCED cause without LINK_DEGRADED {}",
+                ctx()
+            );
         }
         if before.degraded && !degraded_of(out) && !mb.latched {
             // Back to NORMAL only after a clean window.
@@ -473,17 +505,23 @@ fn check<const N: usize>(
             continue;
         }
         if !is_tick {
-            assert_eq!(applied[i], before.applied[i], "moved between ticks {}", ctx());
-            assert_eq!(modes[i], before.axis_modes[i], "mode changed between ticks {}", ctx());
+            assert_eq!(
+                applied[i],
+                before.applied[i],
+                "moved between ticks {}",
+                ctx()
+            );
+            assert_eq!(
+                modes[i],
+                before.axis_modes[i],
+                "mode changed between ticks {}",
+                ctx()
+            );
             continue;
         }
         let (max, reduced, step) = match modes[i] {
             AxisMode::Coast | AxisMode::Short => (0, 0, 0),
-            AxisMode::Duty => (
-                abs(p.duty_max),
-                abs(p.duty_reduced),
-                abs(p.duty_step),
-            ),
+            AxisMode::Duty => (abs(p.duty_max), abs(p.duty_reduced), abs(p.duty_step)),
             AxisMode::Velocity | AxisMode::Position => (
                 abs(p.v_max),
                 abs(p.reduced_limit),
@@ -494,7 +532,9 @@ fn check<const N: usize>(
         if modes[i] != before.axis_modes[i] {
             // INV-19: only from rest, or into a passive mode.
             assert!(
-                modes[i].is_passive() || before.applied[i] == Speed::ZERO || before.mode == Mode::Brake,
+                modes[i].is_passive()
+                    || before.applied[i] == Speed::ZERO
+                    || before.mode == Mode::Brake,
                 "axis {i} changed mode while moving {}",
                 ctx()
             );
@@ -517,7 +557,12 @@ fn check<const N: usize>(
                 ctx()
             ),
             Mode::Hold | Mode::Stop => {
-                assert!(a <= was || before.mode == Mode::Brake, "axis {i} grew in {:?} {}", model.mode, ctx());
+                assert!(
+                    a <= was || before.mode == Mode::Brake,
+                    "axis {i} grew in {:?} {}",
+                    model.mode,
+                    ctx()
+                );
                 assert!(
                     applied[i].to_bits().signum() * before.applied[i].to_bits().signum() >= 0,
                     "axis {i} changed sign in {:?} {}",
@@ -533,7 +578,12 @@ fn check<const N: usize>(
         if let Some(last) = model.last {
             for i in 0..N {
                 if last.axes[i].mode.is_passive() {
-                    assert_eq!(modes[i], last.axes[i].mode, "passive request driven {}", ctx());
+                    assert_eq!(
+                        modes[i],
+                        last.axes[i].mode,
+                        "passive request driven {}",
+                        ctx()
+                    );
                 }
             }
         }
