@@ -576,14 +576,9 @@ fn check<const N: usize>(
     // INV-17: after a tick outside BRAKE, an axis whose last valid command is passive is passive.
     if is_tick && model.mode != Mode::Brake {
         if let Some(last) = model.last {
-            for i in 0..N {
-                if last.axes[i].mode.is_passive() {
-                    assert_eq!(
-                        modes[i],
-                        last.axes[i].mode,
-                        "passive request driven {}",
-                        ctx()
-                    );
+            for (mode, asked) in modes.iter().zip(last.axes.iter()) {
+                if asked.mode.is_passive() {
+                    assert_eq!(*mode, asked.mode, "passive request driven {}", ctx());
                 }
             }
         }
