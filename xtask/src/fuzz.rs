@@ -11,9 +11,11 @@
 //! the package's other test binaries need no libFuzzer runtime. The release profile is used with
 //! fat LTO off (LTO removes libFuzzer's coverage counters at link time) and opt-level 3.
 //!
-//! Each target reads its committed corpus (`<package>/fuzz-corpus/<target>/`) and writes what it
+//! Each target reads its committed corpus (bolero's location,
+//! `<package>/tests/__fuzz__/<target without fuzz_>/corpus/`, which `cargo test` replays) and writes what it
 //! finds to a working corpus under `target/fuzz/corpus/<target>/`; `--merge` then minimises both
-//! into the committed corpus (libFuzzer `-merge=1`: only inputs that add coverage are kept). A
+//! into the committed corpus (libFuzzer `-merge=1 -use_counters=0`: only inputs that reach a new
+//! edge are kept, so the committed corpus stays small; the working corpus keeps the rest). A
 //! failing input goes to `target/fuzz/crashes/<target>/` and the row says FINDING.
 #![allow(clippy::indexing_slicing, clippy::arithmetic_side_effects)]
 
@@ -304,6 +306,18 @@ fn libfuzzer(
     Ok((out.status.success(), text))
 }
 
+/// The committed corpus of `target`: bolero's own location,
+/// `<package>/tests/__fuzz__/<target without its fuzz_ prefix>/corpus/`, which `cargo test`
+/// replays before its random inputs.
+pub fn committed_corpus(root: &Path, target: &Target) -> PathBuf {
+    let dir = target.name.strip_prefix("fuzz_").unwrap_or(target.name);
+    root.join(target.package)
+        .join("tests")
+        .join("__fuzz__")
+        .join(dir)
+        .join("corpus")
+}
+
 fn files_in(dir: &Path) -> usize {
     std::fs::read_dir(dir).map_or(0, |d| d.filter(|e| e.is_ok()).count())
 }
@@ -321,7 +335,7 @@ fn path_arg(p: &Path) -> Result<String, String> {
 /// Fuzzes one target and, with `--merge`, minimises its corpora into the committed one.
 fn run_one(root: &Path, opts: &Options, exe: &Path, target: &Target) -> Result<Row, String> {
     let pkg = root.join(target.package);
-    let committed = pkg.join("fuzz-corpus").join(target.name);
+    let committed = committed_corpus(root, target);
     let fuzz = root.join("target").join("fuzz");
     let work = fuzz.join("corpus").join(target.name);
     let crashes = fuzz.join("crashes").join(target.name);
@@ -359,6 +373,9 @@ fn run_one(root: &Path, opts: &Options, exe: &Path, target: &Target) -> Result<R
         std::fs::create_dir_all(&fresh).map_err(|e| format!("{}: {e}", fresh.display()))?;
         let merge = vec![
             "-merge=1".to_string(),
+            // One input per edge, not per hit-count bucket: the committed corpus stays at a few
+            // hundred inputs and still reaches every edge the run reached.
+            "-use_counters=0".to_string(),
             path_arg(&fresh)?,
             path_arg(&committed)?,
             path_arg(&work)?,
