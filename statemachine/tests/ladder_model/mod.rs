@@ -18,8 +18,8 @@
 )]
 
 use statemachine::{
-    validate, AxisMode, Condition, Config, Estop, Event, FaultFlags, Ladder, Mode, Setpoint,
-    Source, Speed,
+    validate, AxisDrive, AxisMode, Condition, Config, Estop, Event, FaultFlags, Ladder, Mode,
+    Setpoint, Source, Speed,
 };
 use std::collections::VecDeque;
 
@@ -571,6 +571,34 @@ fn check<const N: usize>(
                 );
             }
             _ => {}
+        }
+    }
+    // INV-15, INV-17: outside BRAKE each axis is driven in its own mode with its applied value;
+    // a position target lies within the travel and its cap is ≥ 0.
+    if let statemachine::Drive::Run(axes) = out.drive {
+        for ((d, mode), value) in axes.iter().zip(modes.iter()).zip(applied.iter()) {
+            match (d, mode) {
+                (AxisDrive::Coast, AxisMode::Coast) | (AxisDrive::Short, AxisMode::Short) => {}
+                (AxisDrive::Duty(x), AxisMode::Duty)
+                | (AxisDrive::Velocity(x), AxisMode::Velocity) => {
+                    assert_eq!(x, value, "drive and applied value differ {}", ctx());
+                }
+                (AxisDrive::Position { target, cap }, AxisMode::Position) => {
+                    assert_eq!(
+                        cap,
+                        value,
+                        "position cap and applied value differ {}",
+                        ctx()
+                    );
+                    assert!(*cap >= Speed::ZERO, "negative cap {}", ctx());
+                    assert!(
+                        p.travel_lo <= *target && *target <= p.travel_hi,
+                        "position target outside the travel {}",
+                        ctx()
+                    );
+                }
+                _ => panic!("axis driven in another mode than its own {}", ctx()),
+            }
         }
     }
     // INV-17: after a tick outside BRAKE, an axis whose last valid command is passive is passive.
