@@ -7,8 +7,9 @@
 //! with a good CRC is delivered at its last byte, whatever came before it; see
 //! `cdc::StreamDecoder` and `teensy::RobustDecoder`) at every byte of a stream built from the
 //! input, with valid, truncated and raw frames spliced in, against a naive reference written
-//! here (independent of the one in the crate's harnesses). Coverage-guided runs (libFuzzer, through
-//! `cargo bolero`, nightly) and their figures are in protocol/README.md.
+//! here (independent of the one in the crate's harnesses). Coverage-guided runs (libFuzzer, nightly:
+//! `cargo xtask fuzz`) and their figures are in protocol/README.md; `cargo test` also replays each
+//! target's committed corpus (`tests/__fuzz__/<target>/corpus/`).
 #![allow(
     clippy::unwrap_used,
     clippy::indexing_slicing,
