@@ -11,7 +11,8 @@
 //! the REDUCED rules are reached in a short sequence), the axis count (2 or 4), then events: ticks
 //! (often several in a row), frames from a small menu of values (valid ones, stale sequence
 //! numbers, out-of-range, NaN, modes the profile refuses, zero and short timeouts), frames refused
-//! below the ladder, conditions, ESTOP engage and release from every source, shutdown, re-arms.
+//! below the ladder, conditions, ESTOP engage and release from every source, shutdown, re-arms
+//! (also followed at once by a frame and a tick, so that inputs leave BRAKE often).
 #![allow(
     clippy::unwrap_used,
     clippy::indexing_slicing,
@@ -115,6 +116,12 @@ fn event<const N: usize>(b: &mut Bytes, g: &mut Gen) -> Vec<Event<N>> {
     match k % 16 {
         0..=4 => vec![Event::Tick; usize::from(k >> 4) + 1],
         5..=8 => vec![Event::Frame(command(b, g)), Event::Tick],
+        // A re-arm request and a frame: a way out of BRAKE within a few bytes.
+        9 if k & 0x80 != 0 => vec![
+            Event::Rearm(Source::ALL[usize::from(k >> 4) % 3]),
+            Event::Frame(command(b, g)),
+            Event::Tick,
+        ],
         9 => vec![Event::Frame(command(b, g))],
         10 => vec![Event::Rejected(
             RejectReason::ALL[usize::from(k >> 4) % RejectReason::ALL.len()],
