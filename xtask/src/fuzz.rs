@@ -84,6 +84,22 @@ pub struct Options {
 pub const USAGE: &str = "cargo xtask fuzz [--seconds N (60)] [--runs N] [--jobs J (1)] [--merge] \
     [--toolchain T (nightly)] [TARGET...]";
 
+/// `cargo xtask fuzz --help`.
+pub const HELP: &str = "Runs every bolero fuzz target coverage-guided (libFuzzer, no sanitizer, the release
+profile without fat LTO) and prints executions, exec/s, coverage (cov, ft) and corpus size per target.
+
+Options:
+  --seconds N     time budget per target (default 60)
+  --runs N        execution budget per target (default: none)
+  --jobs J        targets run at once (default 1)
+  --merge         minimise what the run found into the committed corpora
+                  (<crate>/tests/__fuzz__/<target>/corpus/, one input per edge)
+  --toolchain T   rustup toolchain that builds the instrumented binaries (default nightly)
+  TARGET...       run only these targets (default: all)
+
+Exit status: 0 if every target ran without a finding, 1 otherwise, 64 for a usage error.
+Logs: target/fuzz/logs/<target>.log; a failing input: target/fuzz/crashes/<target>/.";
+
 /// Reads the arguments after `fuzz`.
 pub fn parse_args(args: &[String]) -> Result<Options, String> {
     let mut o = Options {

@@ -165,6 +165,12 @@ fn main() -> ExitCode {
                 }
             }
         }
+        ["fuzz", "--help" | "-h"] => {
+            println!("usage: {}\n\n{}", fuzz::USAGE, fuzz::HELP);
+            let names: Vec<&str> = fuzz::TARGETS.iter().map(|t| t.name).collect();
+            println!("\nTargets: {}", names.join(", "));
+            ExitCode::SUCCESS
+        }
         ["fuzz", rest @ ..] => {
             let rest: Vec<String> = rest.iter().map(|s| s.to_string()).collect();
             let opts = match fuzz::parse_args(&rest) {
