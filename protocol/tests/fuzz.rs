@@ -505,3 +505,13 @@ fn fuzz_teensy_stream_holds_back_no_frame() {
     report("teensy_stream_holds_back_no_frame", &N);
     eprintln!("  frames delivered: {}", FRAMES.load(Ordering::Relaxed));
 }
+
+/// `cargo xtask fuzz` passes each target's input limit to libFuzzer as `-max_len` (bolero's
+/// libFuzzer engine does not): the numbers written there must still cover what the targets read.
+#[test]
+fn xtask_fuzz_max_lens_cover_the_targets() {
+    assert_eq!(amr::FRAME_LEN, 64);
+    assert_eq!(2 * cdc::MAX_FRAME_LEN, 522);
+    assert_eq!(3 * teensy::ROBUST_BUF, 267);
+    assert!(pi_spi::RX_LEN <= 512 && pi_spi::TX_LEN <= 512);
+}

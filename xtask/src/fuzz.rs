@@ -34,27 +34,55 @@ pub struct Target {
     pub test: &'static str,
     /// The test function.
     pub name: &'static str,
+    /// libFuzzer's `-max_len`: the target's own `with_max_len` (bolero's libFuzzer engine does not
+    /// pass it on, and longer inputs only cost time), at least the bytes the target reads.
+    pub max_len: usize,
 }
 
-const fn t(package: &'static str, test: &'static str, name: &'static str) -> Target {
+const fn t(
+    package: &'static str,
+    test: &'static str,
+    name: &'static str,
+    max_len: usize,
+) -> Target {
     Target {
         package,
         test,
         name,
+        max_len,
     }
 }
 
 /// Every fuzz target of the workspace.
 pub const TARGETS: [Target; 9] = [
-    t("protocol", "fuzz", "fuzz_amr_command"),
-    t("protocol", "fuzz", "fuzz_amr_feedback"),
-    t("protocol", "fuzz", "fuzz_amr_info"),
-    t("protocol", "fuzz", "fuzz_cdc"),
-    t("protocol", "fuzz", "fuzz_cdc_stream_holds_back_no_frame"),
-    t("protocol", "fuzz", "fuzz_teensy"),
-    t("protocol", "fuzz", "fuzz_teensy_stream_holds_back_no_frame"),
-    t("protocol", "fuzz", "fuzz_pi_spi"),
-    t("statemachine", "fuzz_ladder", "fuzz_ladder_against_model"),
+    // amr::FRAME_LEN
+    t("protocol", "fuzz", "fuzz_amr_command", 64),
+    t("protocol", "fuzz", "fuzz_amr_feedback", 64),
+    t("protocol", "fuzz", "fuzz_amr_info", 64),
+    // 2 × cdc::MAX_FRAME_LEN
+    t("protocol", "fuzz", "fuzz_cdc", 522),
+    t(
+        "protocol",
+        "fuzz",
+        "fuzz_cdc_stream_holds_back_no_frame",
+        64,
+    ),
+    // 3 × teensy::ROBUST_BUF
+    t("protocol", "fuzz", "fuzz_teensy", 267),
+    t(
+        "protocol",
+        "fuzz",
+        "fuzz_teensy_stream_holds_back_no_frame",
+        64,
+    ),
+    // at least pi_spi::TRANSFER_LEN (the larger buffer)
+    t("protocol", "fuzz", "fuzz_pi_spi", 512),
+    t(
+        "statemachine",
+        "fuzz_ladder",
+        "fuzz_ladder_against_model",
+        256,
+    ),
 ];
 
 /// The instrumentation `cargo bolero` 0.13.5 passes for libFuzzer, without a sanitizer.
@@ -363,6 +391,7 @@ fn run_one(root: &Path, opts: &Options, exe: &Path, target: &Target) -> Result<R
         path_arg(&committed)?,
         format!("-artifact_prefix={}/", path_arg(&crashes)?),
         format!("-max_total_time={}", opts.seconds),
+        format!("-max_len={}", target.max_len),
         "-print_final_stats=1".to_string(),
     ];
     if let Some(r) = opts.runs {
