@@ -2,7 +2,8 @@
 //! §3 SR-1 … SR-15, §4 INV-0 … INV-19), not from `Ladder`'s code. It tracks what the rules make
 //! observable: the rung, whether BRAKE is latched and why, the age and the comm-loss threshold in
 //! force, the last valid command, the re-arm that is pending, the ESTOP holders and the source whose
-//! release ended an ESTOP, and the refused-release counter. The applied values are not recomputed:
+//! release ended an ESTOP, and the counters SR-14 and SR-8 name (refused ESTOP releases, refused
+//! re-arms, re-arms that released BRAKE). The applied values are not recomputed:
 //! the model checks them against the envelope the rules allow (limits, ramps, modes).
 //!
 //! Frame validation is `statemachine::validate`, whose contract INV-5 proves on its own; the model
@@ -74,7 +75,7 @@ pub struct Model<const N: usize> {
     pub last_dirty: u64,
 }
 
-/// What one event did, as the model predicts it, for the checks that need the state before it.
+/// The ladder's state before an event, for the checks that compare before and after.
 pub struct Before<const N: usize> {
     pub mode: Mode,
     pub applied: [Speed; N],
