@@ -7,8 +7,9 @@
 //! with a good CRC is delivered at its last byte, whatever came before it; see
 //! `cdc::StreamDecoder` and `teensy::RobustDecoder`) at every byte of a stream built from the
 //! input, with valid, truncated and raw frames spliced in, against a naive reference written
-//! here (independent of the one in the crate's harnesses). Coverage-guided runs (libFuzzer, through
-//! `cargo bolero`, nightly) and their figures are in protocol/README.md.
+//! here (independent of the one in the crate's harnesses). Coverage-guided runs (libFuzzer, nightly:
+//! `cargo xtask fuzz`) and their figures are in protocol/README.md; `cargo test` also replays each
+//! target's committed corpus (`tests/__fuzz__/<target>/corpus/`).
 #![allow(
     clippy::unwrap_used,
     clippy::indexing_slicing,
@@ -131,6 +132,30 @@ fn fuzz_cdc() {
                 let n = m.encode(&mut out);
                 assert_eq!(cdc::decode_frame(&out[..n]), Ok(m));
             }
+            // Too short, or no SOF: a framing error, whatever follows.
+            if input.len() < cdc::MIN_FRAME_LEN || input[..2] != cdc::SOF {
+                assert_eq!(cdc::decode_frame(input), Err(cdc::Error::Framing));
+            }
+            // Any MSG_ID and payload in a frame with a good length and CRC: the frame layer
+            // accepts it, so the answer is a message or a message-level error, never Framing or
+            // Crc; a message re-encodes to one that decodes the same.
+            if let Some((&id, payload)) = input.split_first() {
+                let payload = &payload[..payload.len().min(cdc::MAX_PAYLOAD)];
+                let mut frame = [0u8; cdc::MAX_FRAME_LEN];
+                let n = cdc::encode_raw(id, payload, &mut frame);
+                match cdc::decode_frame(&frame[..n]) {
+                    Ok(m) => {
+                        let mut out = [0u8; cdc::MAX_FRAME_LEN];
+                        let k = m.encode(&mut out);
+                        assert_eq!(cdc::decode_frame(&out[..k]), Ok(m));
+                    }
+                    Err(e) => assert!(
+                        !matches!(e, cdc::Error::Framing | cdc::Error::Crc),
+                        "{e:?} for a well-framed {:02X?}",
+                        &frame[..n]
+                    ),
+                }
+            }
             let mut dec = cdc::StreamDecoder::new();
             let mut seen = 0u32;
             for r in dec.feed(input) {
@@ -191,10 +216,44 @@ fn fuzz_teensy() {
                 let n = m.encode_robust(&mut out).unwrap();
                 assert_eq!(Msg::decode_robust(&out[..n]), Ok(m));
             }
+            // Any version and message bytes in a body with a good CRC, COBS-stuffed: the frame
+            // layer accepts it, so the answer is a command or a version or message error, never
+            // Framing or Crc; a command re-encodes to one that decodes the same.
+            const BODY: usize = teensy::robust_body_len(4);
+            let mut body = [0u8; BODY];
+            let n = input.len().min(BODY - 2);
+            body[..n].copy_from_slice(&input[..n]);
+            let crc = crc16::checksum(&body[..BODY - 2]);
+            body[BODY - 2..].copy_from_slice(&crc.to_le_bytes());
+            let mut frame = [0u8; Msg::ROBUST_LEN];
+            let len = corncobs::encode_buf(&body, &mut frame);
+            match Msg::decode_robust(&frame[..len]) {
+                Ok(m) => {
+                    let mut out = [0u8; teensy::ROBUST_BUF];
+                    let k = m.encode_robust(&mut out).unwrap();
+                    assert_eq!(Msg::decode_robust(&out[..k]), Ok(m));
+                }
+                Err(e) => assert!(
+                    !matches!(e, RejectReason::Framing | RejectReason::Crc),
+                    "{e:?} for a well-framed {:02X?}",
+                    &frame[..len]
+                ),
+            }
             let mut dec = teensy::RobustDecoder::<4>::new();
             for &b in input {
                 let _ = dec.push(b);
             }
+            for &b in &frame[..len] {
+                let _ = dec.push(b);
+            }
+            // After arbitrary bytes the decoder may still be resynchronising (the stream target
+            // checks when it must deliver), so here only a clean decoder must deliver the frame.
+            let mut clean = teensy::RobustDecoder::<4>::new();
+            let mut got = None;
+            for &b in &frame[..len] {
+                got = clean.push(b);
+            }
+            assert_eq!(got, Some(Msg::decode_robust(&frame[..len])));
         });
     report("teensy", &N);
 }
@@ -446,3 +505,15 @@ fn fuzz_teensy_stream_holds_back_no_frame() {
     report("teensy_stream_holds_back_no_frame", &N);
     eprintln!("  frames delivered: {}", FRAMES.load(Ordering::Relaxed));
 }
+
+// `cargo xtask fuzz` passes each target's input limit to libFuzzer as `-max_len` (bolero's
+// libFuzzer engine does not): the numbers written there (`xtask/src/fuzz.rs`) must still cover what
+// the targets read. Checked when this file compiles.
+const _: () = assert!(
+    amr::FRAME_LEN == 64
+        && 2 * cdc::MAX_FRAME_LEN == 522
+        && 3 * teensy::ROBUST_BUF == 267
+        && pi_spi::RX_LEN <= 512
+        && pi_spi::TX_LEN <= 512,
+    "update the -max_len of the fuzz targets in xtask/src/fuzz.rs"
+);

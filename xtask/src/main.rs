@@ -8,6 +8,10 @@
 //! table of `proofs/REPORT.md`: harness, result, checks, covers, verification time, one row per
 //! harness in name order, so the report's figures come from a run, not from typing.
 //!
+//! `fuzz [--seconds N] [--runs N] [--jobs J] [--merge] [TARGET…]`: runs every bolero fuzz target
+//! coverage-guided (libFuzzer, nightly) and prints executions, coverage and corpus per target (see
+//! `fuzz`).
+//!
 //! `trace`: checks that `proofs/SAFETY.md`, `proofs/REPORT.md` and the harness code agree (see
 //! `trace`): one line per problem, non-zero exit if there is any.
 //!
@@ -16,6 +20,7 @@
 #![forbid(unsafe_code)]
 
 mod e2e;
+mod fuzz;
 mod ros_e2e;
 mod rta;
 mod trace;
@@ -267,9 +272,44 @@ fn main() -> ExitCode {
                 }
             }
         }
+        ["fuzz", "--help" | "-h"] => {
+            println!("usage: {}\n\n{}", fuzz::USAGE, fuzz::HELP);
+            let names: Vec<&str> = fuzz::TARGETS.iter().map(|t| t.name).collect();
+            println!("\nTargets: {}", names.join(", "));
+            ExitCode::SUCCESS
+        }
+        ["fuzz", rest @ ..] => {
+            let rest: Vec<String> = rest.iter().map(|s| s.to_string()).collect();
+            let opts = match fuzz::parse_args(&rest) {
+                Ok(o) => o,
+                Err(e) => {
+                    eprintln!("xtask fuzz: {e}\nusage: {}", fuzz::USAGE);
+                    return ExitCode::from(64);
+                }
+            };
+            let root = Path::new(env!("CARGO_MANIFEST_DIR"))
+                .parent()
+                .unwrap_or(Path::new("."));
+            match fuzz::run(root, &opts) {
+                Ok((table, ok)) => {
+                    print!("{table}");
+                    if ok {
+                        ExitCode::SUCCESS
+                    } else {
+                        eprintln!("xtask fuzz: a target failed (see its row)");
+                        ExitCode::FAILURE
+                    }
+                }
+                Err(e) => {
+                    eprintln!("xtask fuzz: {e}");
+                    ExitCode::FAILURE
+                }
+            }
+        }
         _ => {
             eprintln!(
-                "usage: cargo xtask kani-table <dir of `--output-into-files` results>\n       cargo xtask trace\n       cargo xtask rta [--check [FILE] | --write [FILE]]\n       cargo xtask qemu-e2e <cdc|teensy>\n       cargo xtask ros-e2e"
+                "usage: cargo xtask kani-table <dir of `--output-into-files` results>\n       cargo xtask trace\n       cargo xtask rta [--check [FILE] | --write [FILE]]\n       cargo xtask qemu-e2e <cdc|teensy>\n       cargo xtask ros-e2e\n       {}",
+                fuzz::USAGE
             );
             ExitCode::FAILURE
         }
