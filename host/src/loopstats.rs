@@ -14,10 +14,10 @@
 
 use serde::Serialize;
 
-/// Nominal period, µs.
-pub const NOMINAL_US: f64 = 1000.0;
-/// Allowed deviation of one period, µs.
-pub const TOLERANCE_US: f64 = 200.0;
+/// Nominal period, µs: the AMR SPI link's contract ([`crate::pacing::CONTRACT_PERIOD`]).
+pub const NOMINAL_US: f64 = crate::pacing::CONTRACT_PERIOD.as_micros() as f64;
+/// Allowed deviation of one period, µs ([`crate::pacing::CONTRACT_TOLERANCE`]).
+pub const TOLERANCE_US: f64 = crate::pacing::CONTRACT_TOLERANCE.as_micros() as f64;
 /// The goal: the Rust loop has at least this many times fewer periods outside the window.
 pub const GOAL_FACTOR: f64 = 10.0;
 
