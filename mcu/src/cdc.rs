@@ -128,7 +128,21 @@ impl CdcLinkTask {
         byte: u8,
         st: &BoardStatus,
     ) -> Option<Output<MOTORS>> {
-        match self.dec.push(byte)? {
+        let decoded = self.dec.push(byte)?;
+        self.on_decoded(safety, decoded, st)
+    }
+
+    /// What the stream decoder delivered at a frame's last byte, applied: a message to the ladder
+    /// (and its ACK or STATUS to the queue), a refusal counted. The second half of
+    /// [`Self::on_byte`], split off so that the board's half of an ESTOP frame is proven on its own
+    /// (P-17); the decoder's half is the protocol crate's.
+    pub fn on_decoded(
+        &mut self,
+        safety: &mut Safety<MOTORS>,
+        decoded: Result<Message, cdc::Error>,
+        st: &BoardStatus,
+    ) -> Option<Output<MOTORS>> {
+        match decoded {
             Err(e) => Some(self.refuse(safety, e)),
             Ok(Message::Ping) => {
                 self.send_status(safety, st);

@@ -129,9 +129,43 @@ pub fn micros_bounded(src: &mut impl Source) {
     cover!(src, off >= 1000, "update pending counted");
 }
 
-/// P-17: Seed 001 board: whatever the ladder's state and whatever bytes came before it (a false
-/// start-of-frame, a truncated frame), an `ESTOP 1` frame latches BRAKE in the link task's step for
-/// its last byte, and is acknowledged.
+/// P-17: Seed 001 board, the link body's half: from any ladder state, the decoded `ESTOP 1` that
+/// the stream decoder delivers at the frame's last byte latches BRAKE (mode and drive) in that
+/// same call, leaves the link holding the ESTOP, and queues its ACK. That the decoder delivers the
+/// frame at its last byte whatever came before it is the protocol crate's half (P-5);
+/// [`serial_estop_brakes_at_its_last_byte`] tests the two together, byte by byte.
+pub fn serial_estop_message_brakes(src: &mut impl Source) {
+    use crate::cdc::{BoardStatus, CdcLinkTask, MOTORS};
+    use protocol::cdc::Message;
+    use statemachine::{check, Config, Drive, Estop, Mode, Source as Origin};
+    let ladder = statemachine::harness::arbitrary::ladder::<MOTORS>(src, Config::CDC);
+    let mut safety = crate::Safety::from_ladder(ladder);
+    let mut link = CdcLinkTask::new();
+    let st = BoardStatus::default();
+    let was_running = safety.mode() != Mode::Brake;
+    let queued = link.tx.len();
+    let out = link.on_decoded(&mut safety, Ok(Message::Estop(Estop::Engage)), &st);
+    check!(
+        matches!(out, Some(o) if o.mode == Mode::Brake && o.drive == Drive::Brake),
+        "P-17: a decoded ESTOP frame brakes in the call that applies it"
+    );
+    check!(
+        safety.mode() == Mode::Brake,
+        "P-17: the ladder is latched in BRAKE after the ESTOP frame"
+    );
+    check!(
+        safety.ladder().estop_owners() & Origin::Primary.bit() != 0,
+        "P-17: the link holds the ESTOP it engaged"
+    );
+    check!(link.tx.len() > queued, "P-17: the ESTOP is acknowledged");
+    cover!(src, was_running, "ESTOP while running");
+    cover!(src, !was_running, "ESTOP while already braked");
+}
+
+/// P-17: Seed 001 board, bytes to BRAKE (a test: the two halves are proven separately, see
+/// [`serial_estop_message_brakes`]): whatever the ladder's state and whatever bytes came before it
+/// (a false start-of-frame, a truncated frame), an `ESTOP 1` frame latches BRAKE in the link task's
+/// step for its last byte, and is acknowledged.
 pub fn serial_estop_brakes_at_its_last_byte(src: &mut impl Source) {
     use crate::cdc::{BoardStatus, CdcLinkTask, MOTORS};
     use protocol::cdc::{Message, MAX_FRAME_LEN};
@@ -154,14 +188,7 @@ pub fn serial_estop_brakes_at_its_last_byte(src: &mut impl Source) {
             }
         };
     }
-    // Under Kani the frame comes first: that any bytes before it do not delay it is the protocol
-    // crate's proof (`verify_stream_holds_back_no_frame_*`); this one covers the link body from any
-    // ladder state. The twin keeps the bytes before it.
-    let used = if cfg!(kani) {
-        0
-    } else {
-        usize::from(src.below(3))
-    };
+    let used = usize::from(src.below(3));
     for &b in garbage.iter().take(used) {
         link.on_byte(&mut safety, b, &st);
     }
@@ -185,7 +212,6 @@ pub fn serial_estop_brakes_at_its_last_byte(src: &mut impl Source) {
         check!(link.tx.len() > queued, "the ESTOP is acknowledged");
     }
     cover!(src, was_running, "ESTOP while running");
-    #[cfg(not(kani))]
     cover!(
         src,
         used == 2 && garbage == [0xAA, 0x55],
@@ -692,6 +718,44 @@ mod update_models {
     }
 }
 
+/// Stand-ins for `libm`'s trigonometry under Kani: each returns any value in the real function's
+/// range (NaN where the real one returns NaN), which `mcu/tests/libm_ranges.rs` checks for every
+/// f32 argument, so a property proven with them holds for the real functions.
+#[cfg(kani)]
+mod libm_models {
+    use core::f32::consts::PI;
+
+    fn any_within(bound: f32) -> f32 {
+        let v: f32 = kani::any();
+        kani::assume(v >= -bound && v <= bound);
+        v
+    }
+
+    /// `libm::sinf`: in [−1, 1] for a finite argument, NaN otherwise.
+    pub fn sinf(x: f32) -> f32 {
+        if x.is_finite() {
+            any_within(1.0)
+        } else {
+            f32::NAN
+        }
+    }
+
+    /// `libm::cosf`: in [−1, 1] for a finite argument, NaN otherwise.
+    pub fn cosf(x: f32) -> f32 {
+        sinf(x)
+    }
+
+    /// `libm::remainderf(x, 2π)`: in [−π, π] for a finite `x`, NaN otherwise. The odometry calls
+    /// it with the divisor `TAU` only, the one divisor the range test checks.
+    pub fn remainderf(x: f32, _y: f32) -> f32 {
+        if x.is_finite() {
+            any_within(PI)
+        } else {
+            f32::NAN
+        }
+    }
+}
+
 #[cfg(kani)]
 mod proofs {
     use statemachine::harness::KaniSource;
@@ -718,14 +782,14 @@ mod proofs {
         super::micros_bounded(&mut KaniSource);
     }
 
-    /// Pending: with the whole ladder state symbolic and the link body's ACK encoding, CBMC had
-    /// not finished after 8 minutes (6 GB). The twin runs; the decoder's half is proven in the
-    /// protocol crate, the ladder's (ESTOP latches BRAKE in the same step) by INV-7.
-    #[cfg_attr(kani_pending, kani::proof)]
-    #[cfg_attr(kani_pending, kani::unwind(262))]
-    #[allow(dead_code)]
-    fn verify_serial_estop_brakes_at_its_last_byte() {
-        super::serial_estop_brakes_at_its_last_byte(&mut KaniSource);
+    /// The link body's half of an ESTOP frame, from any ladder state (the bytes' half is the
+    /// protocol crate's P-5). The whole byte path from any ladder state did not finish (8 min,
+    /// 6 GB: the symbolic ladder and the decoder's 262-iteration loops in one formula); it runs
+    /// as the test `serial_estop_brakes_at_its_last_byte`.
+    #[kani::proof]
+    #[kani::unwind(17)]
+    fn verify_serial_estop_message_brakes() {
+        super::serial_estop_message_brakes(&mut KaniSource);
     }
 
     /// Command validation is INV-5's proven contract here (`statemachine::kani_models`), as in
@@ -769,16 +833,17 @@ mod proofs {
         super::odometry_configure_guarded(&mut KaniSource);
     }
 
-    /// Pending: the update runs `libm::sinf`/`cosf`/`remainderf` (argument reduction with f64
-    /// arithmetic and, for large arguments, a multi-word Payne-Hanek loop) on values computed from
-    /// 16 symbolic f32 and 4 symbolic counts, about 40 f32 and 60 f64 multiplications and divisions
-    /// that CBMC bit-blasts; not expected to finish in reasonable time and memory. A feasible route
-    /// is stubbing the three functions with any value in their range (`-Z stubbing`), which
-    /// over-approximates them and keeps the finiteness argument of the module documentation. The
-    /// twin runs (120 000 cases, biased to NaN, ±∞, the bounds and wrapping counts).
-    #[cfg_attr(kani_pending, kani::proof)]
-    #[cfg_attr(kani_pending, kani::unwind(17))]
-    #[allow(dead_code)]
+    /// The update with `libm::sinf`, `cosf` and `remainderf` replaced by their ranges
+    /// (`libm_models`): any value in [−1, 1] for a finite argument, any value in [−π, π] for a
+    /// finite remainder by 2π, NaN otherwise. That over-approximates the real functions, whose
+    /// ranges the test `mcu/tests/libm_ranges.rs` checks for every one of the 2³² f32 arguments;
+    /// without the stand-ins their argument reduction (f64 arithmetic, a multi-word loop for large
+    /// arguments) is bit-blasted and the proof does not finish.
+    #[kani::proof]
+    #[kani::unwind(17)]
+    #[kani::stub(libm::sinf, super::libm_models::sinf)]
+    #[kani::stub(libm::cosf, super::libm_models::cosf)]
+    #[kani::stub(libm::remainderf, super::libm_models::remainderf)]
     fn verify_odometry_update_finite() {
         super::odometry_update_finite(&mut KaniSource);
     }
@@ -808,6 +873,11 @@ mod twins {
     #[test]
     fn micros_bounded() {
         Twin::run(0x3C_04, CASES, super::micros_bounded).assert_covered(1);
+    }
+
+    #[test]
+    fn serial_estop_message_brakes() {
+        Twin::run(0x3C_0C, 50_000, super::serial_estop_message_brakes).assert_covered(2);
     }
 
     #[test]

@@ -146,7 +146,7 @@ fn decode_total<S: Source, M>(
                     | RejectReason::Decode
                     | RejectReason::Version)
         ),
-        "P-21: the decoder returns a message or one of its typed errors"
+        "P-3: the decoder returns a message or one of its typed errors"
     );
     cover!(src, r.is_ok(), "decoded");
     cover!(src, r == Err(RejectReason::Crc), "crc error");
@@ -155,7 +155,7 @@ fn decode_total<S: Source, M>(
     cover!(src, r == Err(RejectReason::Version), "version error");
 }
 
-/// P-21: [`decode_total`] for `decode_command`.
+/// P-3: [`decode_total`] for `decode_command`.
 pub(crate) fn check_decode_command_total(src: &mut impl Source) {
     decode_total(
         src,
@@ -164,7 +164,7 @@ pub(crate) fn check_decode_command_total(src: &mut impl Source) {
     );
 }
 
-/// P-21: [`decode_total`] for `decode_feedback`.
+/// P-3: [`decode_total`] for `decode_feedback`.
 pub(crate) fn check_decode_feedback_total(src: &mut impl Source) {
     decode_total(
         src,
@@ -173,12 +173,12 @@ pub(crate) fn check_decode_feedback_total(src: &mut impl Source) {
     );
 }
 
-/// P-21: [`decode_total`] for `decode_info`.
+/// P-3: [`decode_total`] for `decode_info`.
 pub(crate) fn check_decode_info_total(src: &mut impl Source) {
     decode_total(src, |s, f| encode_info(&any_info(s), f), decode_info);
 }
 
-/// P-21: [`decode_total`] for `decode_mcu_frame`, with valid frames of both kinds.
+/// P-3: [`decode_total`] for `decode_mcu_frame`, with valid frames of both kinds.
 pub(crate) fn check_decode_mcu_frame_total(src: &mut impl Source) {
     decode_total(
         src,
@@ -193,7 +193,7 @@ pub(crate) fn check_decode_mcu_frame_total(src: &mut impl Source) {
     );
 }
 
-/// P-21: encode → decode gives back the same command, bit for bit; out-of-range modes are refused, never truncated.
+/// P-6: encode → decode gives back the same command, bit for bit; out-of-range modes are refused, never truncated.
 pub(crate) fn check_command_round_trip(src: &mut impl Source) {
     let cmd = any_command(src);
     let mut f = [0u8; FRAME_LEN];
@@ -202,12 +202,12 @@ pub(crate) fn check_command_round_trip(src: &mut impl Source) {
     if cmd.control_mode <= 0xFF {
         assert!(
             matches!(r, Ok(d) if same_command(&d, &cmd)),
-            "P-21: a command with an in-range mode decodes to itself"
+            "P-6: a command with an in-range mode decodes to itself"
         );
     } else {
         assert!(
             r == Err(RejectReason::Decode),
-            "P-21: a command with an out-of-range mode is refused as Decode"
+            "P-6: a command with an out-of-range mode is refused as Decode"
         );
     }
     cover!(src, cmd.left_speed_cmd.is_nan(), "NaN speed round-trips");
@@ -216,7 +216,7 @@ pub(crate) fn check_command_round_trip(src: &mut impl Source) {
     cover!(src, usize::from(f[0]) == MAX_COMMAND_LEN, "longest command");
 }
 
-/// P-21: encode → decode gives back the same feedback, bit for bit.
+/// P-6: encode → decode gives back the same feedback, bit for bit.
 pub(crate) fn check_feedback_round_trip(src: &mut impl Source) {
     let fb = any_feedback(src);
     let mut f = [0u8; FRAME_LEN];
@@ -225,12 +225,12 @@ pub(crate) fn check_feedback_round_trip(src: &mut impl Source) {
     if fb.fault_flags <= 0xFFFF && fb.mode <= 0xFF {
         assert!(
             matches!(r, Ok(d) if same_feedback(&d, &fb)),
-            "P-21: feedback with an in-range mode decodes to itself"
+            "P-6: feedback with an in-range mode decodes to itself"
         );
     } else {
         assert!(
             r == Err(RejectReason::Decode),
-            "P-21: feedback with an out-of-range mode is refused as Decode"
+            "P-6: feedback with an out-of-range mode is refused as Decode"
         );
     }
     cover!(src, fb.left_encoder < 0, "negative encoder count");
@@ -242,7 +242,7 @@ pub(crate) fn check_feedback_round_trip(src: &mut impl Source) {
     cover!(src, fb.mode > 0xFF, "out-of-range mode refused");
 }
 
-/// P-21: encode → decode gives back the same info message, through `decode_info` and through
+/// P-6: encode → decode gives back the same info message, through `decode_info` and through
 /// `decode_mcu_frame`; `decode_feedback` refuses the frame as `Version` (no `protocol_version`), and
 /// `decode_info` refuses the feedback frame of any feedback the same way (no `info_version`).
 pub(crate) fn check_info_round_trip(src: &mut impl Source) {
@@ -251,25 +251,25 @@ pub(crate) fn check_info_round_trip(src: &mut impl Source) {
     encode_info(&info, &mut f);
     assert!(
         decode_info(&f) == Ok(info),
-        "P-21: an identity frame decodes to the identity sent"
+        "P-6: an identity frame decodes to the identity sent"
     );
     assert!(
         decode_mcu_frame(&f) == Ok(McuFrame::Info(info)),
-        "P-21: an identity frame decodes as McuFrame::Info of the identity sent"
+        "P-6: an identity frame decodes as McuFrame::Info of the identity sent"
     );
     assert!(
         decode_feedback(&f) == Err(RejectReason::Version),
-        "P-21: the feedback decoder refuses an identity frame as Version"
+        "P-6: the feedback decoder refuses an identity frame as Version"
     );
     assert!(
         decode_command(&f) == Err(RejectReason::Version),
-        "P-21: the command decoder refuses an identity frame as Version"
+        "P-6: the command decoder refuses an identity frame as Version"
     );
     let mut g = [0u8; FRAME_LEN];
     encode_feedback(&any_feedback(src), &mut g);
     assert!(
         decode_info(&g) == Err(RejectReason::Version),
-        "P-21: the identity decoder refuses a feedback frame as Version"
+        "P-6: the identity decoder refuses a feedback frame as Version"
     );
     cover!(src, usize::from(f[0]) == MAX_INFO_LEN, "longest info");
     cover!(
@@ -280,7 +280,7 @@ pub(crate) fn check_info_round_trip(src: &mut impl Source) {
     cover!(src, info.board == BoardProfile::PiSpi, "last board profile");
 }
 
-/// P-21: Flipping any one of the 512 bits of a valid command frame makes it rejected.
+/// P-7: Flipping any one of the 512 bits of a valid command frame makes it rejected.
 pub(crate) fn check_command_bit_flip_detected(src: &mut impl Source) {
     let cmd = any_command(src);
     assume!(src, cmd.control_mode <= 0xFF);
@@ -290,7 +290,7 @@ pub(crate) fn check_command_bit_flip_detected(src: &mut impl Source) {
     f[bit / 8] ^= 1 << (bit % 8);
     assert!(
         decode_command(&f).is_err(),
-        "P-21: a command frame with one bit flipped is refused"
+        "P-7: a command frame with one bit flipped is refused"
     );
     let byte = bit / 8;
     let len = usize::from(f[0]);
@@ -308,7 +308,7 @@ pub(crate) fn check_command_bit_flip_detected(src: &mut impl Source) {
     cover!(src, byte >= CRC_OFFSET, "flip in crc");
 }
 
-/// P-21: Flipping any one of the 512 bits of a valid feedback frame makes it rejected.
+/// P-7: Flipping any one of the 512 bits of a valid feedback frame makes it rejected.
 pub(crate) fn check_feedback_bit_flip_detected(src: &mut impl Source) {
     let fb = any_feedback(src);
     let mut f = [0u8; FRAME_LEN];
@@ -317,13 +317,13 @@ pub(crate) fn check_feedback_bit_flip_detected(src: &mut impl Source) {
     f[bit / 8] ^= 1 << (bit % 8);
     assert!(
         decode_feedback(&f).is_err(),
-        "P-21: a feedback frame with one bit flipped is refused"
+        "P-7: a feedback frame with one bit flipped is refused"
     );
     cover!(src, bit / 8 >= CRC_OFFSET, "flip in crc");
     cover!(src, bit / 8 < CRC_OFFSET, "flip before crc");
 }
 
-/// P-21: `open` (CRC, length, padding) returns a payload or `Crc` / `Framing` for every 64-byte input, and
+/// P-3: `open` (CRC, length, padding) returns a payload or `Crc` / `Framing` for every 64-byte input, and
 /// returns a payload only when the stored CRC (big-endian) matches the bytes before it and the
 /// payload is the `LEN` bytes after the length byte.
 ///
@@ -342,19 +342,19 @@ pub(crate) fn check_open_total(src: &mut impl Source) {
     let r = open(&f);
     match r {
         Ok(p) => {
-            assert!(crc_good, "P-21: a frame opens only with a matching CRC");
+            assert!(crc_good, "P-3: a frame opens only with a matching CRC");
             assert!(
                 p.len() == usize::from(f[LEN_OFFSET]),
-                "P-21: an opened payload has the length byte's length"
+                "P-3: an opened payload has the length byte's length"
             );
             assert!(
                 p.len() <= MAX_PAYLOAD,
-                "P-21: an opened payload fits the frame"
+                "P-3: an opened payload fits the frame"
             );
         }
-        Err(RejectReason::Crc) => assert!(!crc_good, "P-21: a Crc refusal only for a wrong CRC"),
+        Err(RejectReason::Crc) => assert!(!crc_good, "P-3: a Crc refusal only for a wrong CRC"),
         Err(RejectReason::Framing) => {
-            assert!(crc_good, "P-21: a Framing refusal only with a good CRC")
+            assert!(crc_good, "P-3: a Framing refusal only with a good CRC")
         }
         Err(_) => panic!("open refused for a reason it does not check"),
     }
@@ -806,19 +806,29 @@ pub(crate) fn check_seal_open(src: &mut impl Source) {
     cover!(src, len == 0, "empty payload");
 }
 
-/// Kani harnesses. Those marked `cfg_attr(kani_pending, kani::proof)` do not finish on today's
-/// solvers (a symbolic 64-byte frame through the protobuf decoder, or two CRC circuits over the same
-/// symbolic bytes); they run as harnesses only with `RUSTFLAGS="--cfg kani_pending" cargo kani`, and
-/// always as `cargo test` twins. What they state is proven compositionally by the others (see
-/// `check_open_total` and `crc16::verification`) and `proofs/REPORT.md`.
+/// Kani harnesses. The whole-message properties (decoder totality, round trips, bit flips) are
+/// proven by composition, not by one harness over a symbolic 64-byte frame through the protobuf
+/// decoder, which does not finish: `open` ([`check_open_total`]), one step of each decode loop
+/// ([`check_command_field_step`] and kin), one field read back ([`check_command_field_round_trip`]
+/// and kin), a sealed frame opened ([`check_seal_open`]) and every single-bit flip refused by
+/// `open` ([`check_bit_flip_refused_by_open`]); `proofs/REPORT.md` ("Whole-message properties by
+/// composition") puts them together. The whole-message bodies run as `cargo test` twins.
 #[cfg(kani)]
 #[allow(dead_code)]
 mod proofs {
     use super::*;
     use statemachine::harness::KaniSource;
 
-    #[cfg_attr(kani_pending, kani::proof)]
-    #[cfg_attr(kani_pending, kani::unwind(9))]
+    /// The checksum as an uninterpreted function (`model::uninterpreted_checksum`): the property
+    /// needs only that `open` and the harness get the same value for the same 62 bytes, which holds
+    /// for every pure function of the bytes, the real CRC among them; `verify_checksum_total`
+    /// proves the real one returns for every input.
+    #[kani::proof]
+    #[kani::unwind(64)]
+    #[kani::stub(
+        crate::crc16::checksum,
+        crate::crc16::verification::model::uninterpreted_checksum
+    )]
     fn verify_open_total() {
         check_open_total(&mut KaniSource);
     }
@@ -857,24 +867,15 @@ mod proofs {
         check_info_field_round_trip(&mut KaniSource);
     }
 
-    /// With the CRC replaced by a cheap pure function: the property needs only that `open`'s
-    /// checksum of the 62 bytes equals the one `seal` stored for the same bytes, true of every
-    /// pure function and so of the real CRC (see `model::pure_checksum`).
+    /// The checksum as an uninterpreted function (see [`verify_open_total`]): `seal` and `open`
+    /// ask it about the same 62 bytes, so the proof holds for the real CRC.
     #[kani::proof]
-    #[kani::unwind(63)]
+    #[kani::unwind(64)]
     #[kani::stub(
         crate::crc16::checksum,
-        crate::crc16::verification::model::pure_checksum
+        crate::crc16::verification::model::uninterpreted_checksum
     )]
     fn verify_seal_open() {
-        check_seal_open(&mut KaniSource);
-    }
-
-    // Pending: the same with the real CRC, not finished in 7 min (5 GB): the solver has to show
-    // two CRC circuits over the same symbolic bytes equal.
-    #[cfg_attr(kani_pending, kani::proof)]
-    #[cfg_attr(kani_pending, kani::unwind(63))]
-    fn verify_seal_open_real_crc() {
         check_seal_open(&mut KaniSource);
     }
 
@@ -894,62 +895,6 @@ mod proofs {
     #[kani::unwind(11)]
     fn verify_info_field_step() {
         check_info_field_step(&mut KaniSource);
-    }
-
-    #[cfg_attr(kani_pending, kani::proof)]
-    #[cfg_attr(kani_pending, kani::unwind(66))]
-    fn verify_decode_command_total() {
-        check_decode_command_total(&mut KaniSource);
-    }
-
-    #[cfg_attr(kani_pending, kani::proof)]
-    #[cfg_attr(kani_pending, kani::unwind(66))]
-    fn verify_decode_feedback_total() {
-        check_decode_feedback_total(&mut KaniSource);
-    }
-
-    #[cfg_attr(kani_pending, kani::proof)]
-    #[cfg_attr(kani_pending, kani::unwind(15))]
-    fn verify_command_round_trip() {
-        check_command_round_trip(&mut KaniSource);
-    }
-
-    #[cfg_attr(kani_pending, kani::proof)]
-    #[cfg_attr(kani_pending, kani::unwind(15))]
-    fn verify_feedback_round_trip() {
-        check_feedback_round_trip(&mut KaniSource);
-    }
-
-    // Pending like its siblings: the whole message through the decoder. What it states is proven
-    // by `verify_info_field_round_trip` (each field) and `verify_seal_open` (the frame).
-    #[cfg_attr(kani_pending, kani::proof)]
-    #[cfg_attr(kani_pending, kani::unwind(15))]
-    fn verify_info_round_trip() {
-        check_info_round_trip(&mut KaniSource);
-    }
-
-    #[cfg_attr(kani_pending, kani::proof)]
-    #[cfg_attr(kani_pending, kani::unwind(66))]
-    fn verify_decode_info_total() {
-        check_decode_info_total(&mut KaniSource);
-    }
-
-    #[cfg_attr(kani_pending, kani::proof)]
-    #[cfg_attr(kani_pending, kani::unwind(66))]
-    fn verify_decode_mcu_frame_total() {
-        check_decode_mcu_frame_total(&mut KaniSource);
-    }
-
-    #[cfg_attr(kani_pending, kani::proof)]
-    #[cfg_attr(kani_pending, kani::unwind(66))]
-    fn verify_command_bit_flip_detected() {
-        check_command_bit_flip_detected(&mut KaniSource);
-    }
-
-    #[cfg_attr(kani_pending, kani::proof)]
-    #[cfg_attr(kani_pending, kani::unwind(66))]
-    fn verify_feedback_bit_flip_detected() {
-        check_feedback_bit_flip_detected(&mut KaniSource);
     }
 }
 

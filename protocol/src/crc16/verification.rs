@@ -174,14 +174,51 @@ pub(crate) mod model {
         kani::any()
     }
 
-    /// A cheap pure function of the bytes, for harnesses whose property needs only that the same
-    /// bytes give the same checksum (a frame sealed, then opened): true of every pure function,
-    /// and [`super::checksum`] is one (no state, no interior mutability). Not a CRC: it proves
-    /// nothing about error detection.
-    pub(crate) fn pure_checksum(bytes: &[u8]) -> u16 {
-        bytes
-            .iter()
-            .fold(0u16, |acc, &b| acc.rotate_left(3) ^ u16::from(b))
+    /// How many distinct inputs [`uninterpreted_checksum`] remembers: more than any harness calls it.
+    const REMEMBERED: usize = 4;
+    /// The longest input it remembers: a whole seed 000 frame's covered bytes.
+    const REMEMBERED_LEN: usize = 62;
+
+    /// What [`uninterpreted_checksum`] has answered so far: (input length, input bytes, value).
+    static mut ANSWERS: [(usize, [u8; REMEMBERED_LEN], u16); REMEMBERED] =
+        [(0, [0; REMEMBERED_LEN], 0); REMEMBERED];
+    static mut ANSWERED: usize = 0;
+
+    /// An uninterpreted function of the bytes: any value, but the same value whenever it is
+    /// asked again about the same bytes. A property proven with it in place of
+    /// [`super::checksum`] holds for *every* pure function of the bytes, and so for the real CRC,
+    /// which is one (no state, no interior mutability); it proves nothing about error detection,
+    /// which is the real CRC's own (P-1, P-7). For harnesses whose property needs only that the
+    /// same bytes give the same checksum (a frame sealed, then opened; `open` accepting only a
+    /// stored value equal to the checksum the harness computed). Remembers up to [`REMEMBERED`]
+    /// inputs of up to [`REMEMBERED_LEN`] bytes; a harness that asks about more fails its
+    /// assumption, and Kani reports the harness's covers unsatisfiable rather than a false proof.
+    pub(crate) fn uninterpreted_checksum(bytes: &[u8]) -> u16 {
+        kani::assume(bytes.len() <= REMEMBERED_LEN);
+        // SAFETY: Kani runs a harness on one thread, from a fresh program state each time; no
+        // reference to the statics outlives this call.
+        let (answers, answered) = unsafe {
+            (
+                &mut *core::ptr::addr_of_mut!(ANSWERS),
+                &mut *core::ptr::addr_of_mut!(ANSWERED),
+            )
+        };
+        for (len, seen, value) in answers.iter().take(*answered) {
+            if *len == bytes.len() && seen.get(..*len) == Some(bytes) {
+                return *value;
+            }
+        }
+        kani::assume(*answered < REMEMBERED);
+        let value: u16 = kani::any();
+        if let Some(slot) = answers.get_mut(*answered) {
+            slot.0 = bytes.len();
+            if let Some(dst) = slot.1.get_mut(..bytes.len()) {
+                dst.copy_from_slice(bytes);
+            }
+            slot.2 = value;
+        }
+        *answered = answered.saturating_add(1);
+        value
     }
 }
 
