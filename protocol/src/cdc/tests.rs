@@ -376,3 +376,45 @@ fn crc_work_per_byte_is_bounded() {
     assert_eq!(dec.push(window[MAX_FRAME_LEN - 1]), Some(Err(Error::Crc)));
     assert_eq!(dec.stats().crc_errors, 64);
 }
+
+/// The seed's framing has no escaping, so a payload can carry a whole valid frame. The stream
+/// decoder delivers a valid frame at its last byte (P-5), which then is the inner one: an IMU
+/// frame sent 1070.506 s after power-on (`t_ms` = 0x0010_55AA, little-endian `AA 55 10 00`, the
+/// head of a PING frame) whose x acceleration equals a PING frame's CRC is received as a PING, and
+/// the IMU frame itself is lost (its start was consumed with the PING). The stream round trip (P-6) therefore holds for
+/// frames in which no valid frame ends before the last byte; `decode_frame` of the frame itself
+/// is unaffected.
+#[test]
+fn a_payload_that_carries_a_whole_frame_is_received_as_that_frame() {
+    let ping = frame(0x10, &[]);
+    assert_eq!(
+        ping,
+        encoded(&Message::Ping),
+        "0x10 is PING, with no payload"
+    );
+    let ping_crc = i16::from_le_bytes([ping[4], ping[5]]);
+    let imu = Imu {
+        t_ms: 0x0010_55AA,
+        accel_mg: [ping_crc, 0, 1000],
+        gyro_mdps: [0; 3],
+        temp_cdeg: 2500,
+    };
+    let bytes = encoded(&Message::Imu(imu));
+    assert_eq!(
+        &bytes[4..10],
+        &ping[..],
+        "the IMU payload begins with a PING frame"
+    );
+    assert_eq!(
+        decode_frame(&bytes),
+        Ok(Message::Imu(imu)),
+        "the frame itself decodes"
+    );
+    let mut dec = StreamDecoder::new();
+    let got: Vec<_> = bytes.iter().filter_map(|&b| dec.push(b)).collect();
+    assert_eq!(
+        got,
+        [Ok(Message::Ping)],
+        "the stream yields the PING and not the IMU frame"
+    );
+}
