@@ -873,7 +873,7 @@ fn decode_teensy_robust<const N: usize>(bytes: &[u8]) -> Result<Decoded, String>
     if zeros == 0 {
         return Err(refused(
             RejectReason::Framing,
-            "no 0x00 terminator: a robust frame is COBS bytes ending in 00",
+            "no 0x00 terminator: a robust frame ends in 00 and holds no other 00",
         ));
     }
     if zeros == 1 && bytes.last() == Some(&0) {
