@@ -65,7 +65,12 @@ pub(crate) fn check_decode_total(src: &mut impl Source) {
     }
 }
 
-/// P-21: encode → decode round-trips in both formats.
+/// P-21: encode → decode round-trips in both formats, and the stream decoder delivers the robust
+/// frame. A twin only: Kani proves the frame halves (`verify_legacy_round_trip`,
+/// `verify_robust_round_trip` and its pieces); the stream half stays a twin
+/// (`verify_stream_delivers_frame` is pending; `verify_robust_holds_back_no_frame` proves it for
+/// the sample command).
+#[cfg_attr(kani, allow(dead_code))]
 pub(crate) fn check_round_trip(src: &mut impl Source) {
     let m = any_msg(src);
     let mut buf = [0u8; ROBUST_BUF];
