@@ -107,7 +107,8 @@
 //! is judged on the wire, where it is one bit:
 //!
 //! - a flip in `S` is a one-bit error of the CRC's codeword, which CRC-16/CCITT-FALSE always
-//!   catches (it catches every burst of up to 16 bits within `S`);
+//!   catches (it catches every burst of up to 16 bits within `S`: test
+//!   `every_burst_within_the_stuffed_bytes_changes_the_crc`);
 //! - a flip in `K` either breaks a fixed bit (bit 7 of each, bits 6..2 of `K0`) or changes the
 //!   16-bit value the check bytes carry, which then differs from the CRC of the unchanged `S`;
 //! - a flip of the 0x00 leaves no terminator.

@@ -13,8 +13,8 @@
 //! The Teensy robust frame (version 2) stores its CRC in neither order: 7 bits per check byte, each
 //! with bit 7 set, after the stuffed bytes it covers. An error confined to those stuffed bytes
 //! leaves the stored value alone, so it passes only if its pattern is a multiple of the generator
-//! polynomial, which no burst of up to 16 bits is (whatever the length; `every_burst_by_byte_order`
-//! enumerates the covered lengths up to 62, with the CRC bytes in either order). A flip in the
+//! polynomial, which no burst of up to 16 bits is (whatever the length; the test
+//! `every_burst_within_the_stuffed_bytes_changes_the_crc` enumerates every motor count's). A flip in the
 //! check bytes is refused by their own encoding (`teensy::verification`, `check_check_bytes`).
 //!
 //! # Why checking error patterns alone is enough

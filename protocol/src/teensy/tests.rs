@@ -457,3 +457,60 @@ fn every_bit_of_sample_frames_flipped_is_refused() {
         [0usize; 0]
     );
 }
+
+/// Every burst of 1 to 16 bits confined to the stuffed bytes `S` (transmission order, most
+/// significant bit of each byte first, as the CRC reads them) changes the CRC over `S`, for every
+/// motor count (`S` of 26 to 86 bytes): with the check bytes untouched, every such error is refused.
+///
+/// The CRC is affine (the premise `tables_are_linear` in `crc16`), so the change a pattern makes is
+/// the XOR of the changes of its single bits, whatever the frame: each start bit's 2¹⁵ bursts are
+/// walked in Gray-code order, one column XORed per step. Spot checks against the CRC itself
+/// confirm the columns.
+#[test]
+fn every_burst_within_the_stuffed_bytes_changes_the_crc() {
+    let mut x = 0x7E_0F0F_u64;
+    let mut next = move || {
+        x ^= x << 13;
+        x ^= x >> 7;
+        x ^= x << 17;
+        x
+    };
+    for m in 1..=MAX_MOTORS {
+        let len = stuffed_len(m);
+        let bits = len * 8;
+        let zeros = vec![0u8; len];
+        let base = crc16::checksum(&zeros);
+        let columns: std::vec::Vec<u16> = (0..bits)
+            .map(|i| {
+                let mut e = zeros.clone();
+                e[i / 8] ^= 0x80 >> (i % 8);
+                crc16::checksum(&e) ^ base
+            })
+            .collect();
+        for start in 0..bits {
+            let span = (bits - start).min(16);
+            let mut change = columns[start];
+            assert_ne!(change, 0, "{m} motors, bit {start}");
+            for g in 1u32..(1 << (span - 1)) {
+                // Gray code: step g toggles bit `trailing_zeros(g)` of the 15 after `start`.
+                change ^= columns[start + 1 + g.trailing_zeros() as usize];
+                assert_ne!(change, 0, "{m} motors, burst at {start}, step {g}");
+            }
+        }
+        // The columns predict what the CRC does to real bytes: random S, random bursts.
+        for _ in 0..200 {
+            let s: std::vec::Vec<u8> = (0..len).map(|_| next() as u8).collect();
+            let start = next() as usize % bits;
+            let pattern = (next() as u32 | 1) & 0xFFFF;
+            let mut t = s.clone();
+            let mut predicted = 0u16;
+            for i in 0..16 {
+                if pattern >> i & 1 == 1 && start + i < bits {
+                    t[(start + i) / 8] ^= 0x80 >> ((start + i) % 8);
+                    predicted ^= columns[start + i];
+                }
+            }
+            assert_eq!(crc16::checksum(&s) ^ crc16::checksum(&t), predicted);
+        }
+    }
+}
