@@ -259,6 +259,14 @@ def main():
             elif kind == "teensy_robust":
                 body = teensy_robust_body(got)
                 ok = ok and body is not None and body[0] == TEENSY_ROBUST_VERSION and body[1:] == cmdmsg_bytes(values)
+                # Every single-bit flip of the frame is refused here too (the CRC covers the stuffed
+                # bytes as sent, so a flipped COBS code byte cannot pass it).
+                for bit in range(len(got) * 8):
+                    flipped = bytearray(got)
+                    flipped[bit // 8] ^= 1 << (bit % 8)
+                    if teensy_robust_body(bytes(flipped)) is not None:
+                        print("ACCEPTED FLIP", kind, bit)
+                        ok = False
             if not ok:
                 bad += 1
                 print("MISMATCH", kind, got.hex(), frame.hex())
