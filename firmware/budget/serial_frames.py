@@ -10,7 +10,7 @@ import os
 import sys
 
 sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "..", "protocol", "golden"))
-from gen_structs import CDC_CASES_SHAPE, cdc_frame, crc16, teensy_robust, uncobs  # noqa: E402
+from gen_structs import CDC_CASES_SHAPE, cdc_frame, crc16, teensy_robust, teensy_robust_body  # noqa: E402
 
 # Ticks between frames at 50 frames/s (seed 001 and seed 003 both send at 50 Hz).
 GAP = 20
@@ -36,8 +36,9 @@ MTRS, CAL = 0, 1
 
 
 def teensy(cmd_type, angles=(0, 0, 0, 0), speed=0):
-    """Seed 003 robust frame for four joints: COBS(version, CmdMsg (36 bytes), CRC) and 0x00, 41
-    bytes on the wire (the 39-byte body plus COBS's code byte and the terminator)."""
+    """Seed 003 robust frame (version 2) for four joints: COBS(version, CmdMsg (36 bytes)), the
+    three check bytes of the CRC over those stuffed bytes, and 0x00: 42 bytes on the wire (the
+    37-byte body, COBS's code byte, the check bytes and the terminator)."""
     return teensy_robust(dict(cmd_type=cmd_type, is_relative=0, angles=list(angles), speed=speed,
                               accel=0, success=0))
 
@@ -118,13 +119,10 @@ def replies(profile, data):
             i = data.find(b"\xAA\x55", i + 2)
     else:
         for chunk in data.split(b"\x00")[:-1]:
-            try:
-                body = uncobs(chunk + b"\x00")
-            except (AssertionError, IndexError):
-                continue
-            if len(body) > 3 and int.from_bytes(body[-2:], "little") == crc16(body[:-2]):
+            body = teensy_robust_body(chunk + b"\x00")
+            if body is not None and len(body) > 1:
                 words = [int.from_bytes(body[1 + 4 * k:5 + 4 * k], "little", signed=True)
-                         for k in range((len(body) - 3) // 4)]
+                         for k in range((len(body) - 1) // 4)]
                 kind = {MTRS: "MTRS", CAL: "CAL"}.get(words[0], f"cmd_type {words[0]}")
                 out.append(f"{kind} echo, cmd_success {words[-1]}")
     return out

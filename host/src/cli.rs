@@ -35,7 +35,7 @@ pub enum FrameKind {
     PiTx,
     /// Teensy serial link legacy `CmdMsg` packet ending in `\n`, 21 + 4·motors bytes.
     TeensyLegacy,
-    /// Teensy serial link robust `CmdMsg` frame: COBS(version | CmdMsg | CRC) 00 (decode also takes a capture).
+    /// Teensy serial link robust `CmdMsg` frame: COBS(version 2 | CmdMsg), 3 check bytes of the CRC over those bytes, 00 (decode also takes a capture).
     TeensyRobust,
 }
 
@@ -821,34 +821,49 @@ fn decode_teensy_legacy<const N: usize>(bytes: &[u8]) -> Result<String, String> 
     pretty(&CmdMsgJson::from(&m))
 }
 
-/// Why one robust frame failed, with the CRC values and the version where they apply.
+/// Why one robust frame failed, with the CRC values and the version where they apply. The frame is
+/// `S | K0 K1 K2 | 00` (version 2): the CRC covers the stuffed bytes `S`, the check bytes carry it.
 fn robust_error<const N: usize>(frame: &[u8], reason: RejectReason) -> String {
-    let mut body = vec![0u8; frame.len()];
-    let decoded = corncobs::decode_buf(frame, &mut body).ok();
-    let body = decoded.and_then(|n| body.get(..n)).unwrap_or(&[]);
+    let want = teensy::CmdMsg::<N>::ROBUST_LEN;
+    let split = teensy::stuffed_len(N);
+    let stuffed = frame.get(..split).unwrap_or(&[]);
+    let check = frame
+        .get(split..)
+        .and_then(|rest| rest.first_chunk::<{ teensy::CHECK_LEN }>())
+        .copied();
     let detail = match reason {
-        RejectReason::Crc => {
-            let split = body.len().saturating_sub(2);
-            crc_detail(
-                protocol::crc16::checksum(body.get(..split).unwrap_or(&[])),
-                le16(body, split),
-            )
-        }
-        RejectReason::Framing => format!(
-            "a {N}-motor robust frame holds {} bytes after COBS decoding, this one {}{}",
+        RejectReason::Crc => match check.map(|k| (k, teensy::check_value(k))) {
+            Some((_, Some(carried))) => crc_detail(protocol::crc16::checksum(stuffed), carried),
+            Some((k, None)) => format!(
+                "the check bytes {} carry no CRC: each has bit 7 set and the first only bits 7, 1 \
+                 and 0; the capture is corrupted or misaligned",
+                to_hex(&k)
+            ),
+            None => format!("a {N}-motor robust frame has no check bytes at {split}"),
+        },
+        RejectReason::Framing if frame.len() != want => format!(
+            "a {N}-motor robust frame is {want} bytes (COBS of the {}-byte version and CmdMsg, 3 \
+             check bytes, 00), this one {}{}",
             teensy::robust_body_len(N),
-            if decoded.is_some() {
-                body.len().to_string()
-            } else {
-                "is not valid COBS".to_string()
-            },
-            if decoded.is_some() {
-                motors_hint(body.len(), 23)
-            } else {
-                String::new()
-            }
+            frame.len(),
+            motors_hint(frame.len(), teensy::robust_len(0))
         ),
-        _ => teensy_detail::<N>(reason, body.get(1..).unwrap_or(&[]), body.first().copied()),
+        RejectReason::Framing => format!(
+            "the CRC matches, but the {split} stuffed bytes are not one COBS block of the {}-byte \
+             version and CmdMsg",
+            teensy::robust_body_len(N)
+        ),
+        _ => {
+            // COBS of S (the CRC matched, so it is one block): S and a terminator for corncobs.
+            let mut framed = stuffed.to_vec();
+            framed.push(0);
+            let mut body = vec![0u8; framed.len()];
+            let body = corncobs::decode_buf(&framed, &mut body)
+                .ok()
+                .and_then(|n| body.get(..n))
+                .unwrap_or(&[]);
+            teensy_detail::<N>(reason, body.get(1..).unwrap_or(&[]), body.first().copied())
+        }
     };
     refused(reason, &detail)
 }
@@ -858,7 +873,7 @@ fn decode_teensy_robust<const N: usize>(bytes: &[u8]) -> Result<Decoded, String>
     if zeros == 0 {
         return Err(refused(
             RejectReason::Framing,
-            "no 0x00 terminator: a robust frame is COBS bytes ending in 00",
+            "no 0x00 terminator: a robust frame ends in 00 and holds no other 00",
         ));
     }
     if zeros == 1 && bytes.last() == Some(&0) {

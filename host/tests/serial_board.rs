@@ -743,23 +743,24 @@ fn teensy_cal_endeff_config_ping_and_a_corrupted_frame() {
         "the probe switches the end effector off"
     );
 
-    // ENDEFF_ON whose cmd_type bit 0 flipped after the CRC was computed (2 → 3, still no zero
-    // byte), stuffed again: a well-formed COBS frame with a wrong CRC. No echo, nothing switched,
-    // one CRC refusal counted.
+    // ENDEFF_ON whose cmd_type bit 0 flipped on the line (2 → 3, not a zero byte): a frame of the
+    // right length whose CRC no longer matches its stuffed bytes. No echo, nothing switched, one
+    // CRC refusal counted.
     let mut f = [0u8; protocol::teensy::ROBUST_BUF];
     let on = protocol::teensy::CmdMsg::<4> {
         cmd_type: protocol::teensy::CmdType::EndeffOn,
         ..Default::default()
     };
     let n = on.encode_robust(&mut f).unwrap();
-    let mut body = [0u8; protocol::teensy::ROBUST_BUF];
-    let len = corncobs::decode_buf(&f[..n], &mut body).unwrap();
-    assert_eq!(body[1], 2, "version, then cmd_type little-endian");
-    body[1] ^= 0x01;
-    let mut bad = vec![0u8; corncobs::max_encoded_len(len)];
-    let k = corncobs::encode_buf(&body[..len], &mut bad);
-    bad.truncate(k);
-    assert_eq!(bad.len(), n);
+    let mut bad = f[..n].to_vec();
+    // The body is 02 (version) 02 00 00 00 (cmd_type) …: COBS puts a code byte first, so S
+    // starts 03 02 02.
+    assert_eq!(
+        bad[..3],
+        [3, 2, 2],
+        "code byte, version, then cmd_type little-endian"
+    );
+    bad[2] ^= 0x01;
     let (v, lines) = lines_of(|sink| {
         device::run_teensy(
             board.open(),

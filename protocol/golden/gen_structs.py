@@ -182,9 +182,43 @@ def cmdmsg_bytes(c):
     return struct.pack("<ii4iiii", c["cmd_type"], c["is_relative"], *c["angles"], c["speed"], c["accel"], c["success"])
 
 
+TEENSY_ROBUST_VERSION = 2
+
+
+def teensy_check_bytes(crc):
+    """The three check bytes of a robust frame: the CRC's bits 15..14, 13..7 and 6..0, each byte with
+    bit 7 set (so none is 0x00)."""
+    return bytes([0x80 | (crc >> 14), 0x80 | ((crc >> 7) & 0x7F), 0x80 | (crc & 0x7F)])
+
+
+def teensy_check_value(check):
+    """The CRC that three check bytes carry, or None if bit 7 of one is clear or bits 6..2 of the
+    first are not all zero."""
+    k0, k1, k2 = check
+    if k0 & 0xFC != 0x80 or not (k1 & 0x80 and k2 & 0x80):
+        return None
+    return ((k0 & 0x03) << 14) | ((k1 & 0x7F) << 7) | (k2 & 0x7F)
+
+
 def teensy_robust(c):
-    body = bytes([1]) + cmdmsg_bytes(c)
-    return cobs(body + struct.pack("<H", crc16(body)))
+    """Seed 003 robust frame, version 2: S = COBS(version | CmdMsg) without COBS's terminator, then
+    the check bytes of the CRC-16 over S (the bytes as sent), then 0x00."""
+    s = cobs(bytes([TEENSY_ROBUST_VERSION]) + cmdmsg_bytes(c))[:-1]
+    return s + teensy_check_bytes(crc16(s)) + b"\x00"
+
+
+def teensy_robust_body(frame):
+    """The version and CmdMsg bytes of a robust frame, or None if its terminator, check bytes, CRC or
+    COBS are wrong."""
+    if len(frame) < 5 or frame[-1] != 0:
+        return None
+    s, check = frame[:-4], frame[-4:-1]
+    if 0 in s or teensy_check_value(check) != crc16(s):
+        return None
+    try:
+        return uncobs(s + b"\x00")
+    except (AssertionError, IndexError):
+        return None
 
 
 def fmt_values(values):
@@ -223,8 +257,16 @@ def main():
             elif kind == "pi_tx":
                 ok = ok and struct.unpack(TX_FMT, got)[:2] == (15, values["update_time"])
             elif kind == "teensy_robust":
-                body = uncobs(got)
-                ok = ok and struct.unpack("<H", body[-2:])[0] == crc16(body[:-2]) and body[1:-2] == cmdmsg_bytes(values)
+                body = teensy_robust_body(got)
+                ok = ok and body is not None and body[0] == TEENSY_ROBUST_VERSION and body[1:] == cmdmsg_bytes(values)
+                # Every single-bit flip of the frame is refused here too (the CRC covers the stuffed
+                # bytes as sent, so a flipped COBS code byte cannot pass it).
+                for bit in range(len(got) * 8):
+                    flipped = bytearray(got)
+                    flipped[bit // 8] ^= 1 << (bit % 8)
+                    if teensy_robust_body(bytes(flipped)) is not None:
+                        print("ACCEPTED FLIP", kind, bit)
+                        ok = False
             if not ok:
                 bad += 1
                 print("MISMATCH", kind, got.hex(), frame.hex())

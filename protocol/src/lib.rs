@@ -5,7 +5,7 @@
 //! | [`amr`]     | Jetson ↔ STM32 SPI, 1 kHz (seed 000)      | CRC-16, version, sequence      |
 //! | [`cdc`]     | Jetson ↔ STM32 USB CDC / UART (seed 001)  | SOF + CRC-16, streaming resync |
 //! | [`pi_spi`]  | Raspberry Pi ↔ STM32 SPI (seed 004)       | version byte + parity bit      |
-//! | [`teensy`]  | Jetson ↔ Teensy serial (seed 003)         | legacy `\n`; COBS + CRC-16     |
+//! | [`teensy`]  | Jetson ↔ Teensy serial (seed 003)         | legacy `\n`; COBS, CRC-16 of it |
 //!
 //! Each link decodes into the same domain types of the safety core: commands become
 //! [`statemachine::Command`] (or another [`statemachine::Event`]), failures become

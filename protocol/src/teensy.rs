@@ -40,23 +40,87 @@
 //! as a packet. `decode_legacy` stays as it is, for compatibility; the robust successor below has
 //! the property.
 //!
-//! # Robust successor
+//! # Robust successor (version 2)
 //!
-//! The same `CmdMsg` bytes behind a version byte and followed by a CRC, COBS-encoded, and ended by
-//! 0x00 (COBS leaves no other zero in the frame, so a receiver always resynchronises at the next
-//! 0x00, and [`RobustDecoder`] delivers a valid frame at its 0x00 whatever came before it):
+//! The same `CmdMsg` bytes behind a version byte, COBS-encoded, followed by a CRC of the bytes as
+//! sent, and ended by 0x00. No other byte of the frame is 0x00, so a receiver always
+//! resynchronises at the next 0x00, and [`RobustDecoder`] delivers a valid frame at its 0x00
+//! whatever came before it:
 //!
 //! ```text
-//!  COBS( ROBUST_VERSION (1 B) | CmdMsg (20+4N B) | CRC-16/CCITT-FALSE LE over the previous bytes (2 B) ) | 0x00
+//!  frame = S | K0 K1 K2 | 0x00
+//!  S     = COBS( ROBUST_VERSION = 2 (1 B) | CmdMsg (20+4N B) )     one COBS block: 22+4N B, no 0x00
+//!  crc   = CRC-16/CCITT-FALSE over S, the stuffed bytes exactly as sent (code bytes included)
+//!  K0    = 0x80 | crc >> 14                                         (bits 6..2 zero)
+//!  K1    = 0x80 | (crc >> 7) & 0x7F
+//!  K2    = 0x80 | crc & 0x7F
 //! ```
-//! The Teensy echoes the command with `cmd_success` = 1 (done) or 0 (refused) in the same format
-//! ([`CmdMsg::reply`]). Checks on receipt: COBS structure and length → [`RejectReason::Framing`],
-//! CRC → [`RejectReason::Crc`], version → [`RejectReason::Version`], `cmd_type` → [`RejectReason::Decode`].
 //!
-//! The body is shorter than 254 bytes for every motor count up to [`MAX_MOTORS`], so COBS encodes
-//! it as one block and every frame of `N` motors has the same length, [`CmdMsg::ROBUST_LEN`]. The
-//! crate `corncobs` encodes; the receiver checks that length first and undoes the one-block COBS
-//! at fixed positions (a Kani-proven decoder, cross-checked against corncobs' own in the tests).
+//! The version and message (`21 + 4N` bytes, fewer than 254 for every motor count up to
+//! [`MAX_MOTORS`]) always stuff to one COBS block of one code byte more, and the check bytes are
+//! never zero, so every frame of `N` motors has the same length, [`CmdMsg::ROBUST_LEN`] =
+//! `(22 + 4N) + 3 + 1`. Example, N = 1, the command `MTRS, is_relative −63191, angle 0, speed 32,
+//! accel 0, cmd_success 4` (30 bytes):
+//!
+//! ```text
+//!  S:  02 02 01 01 01 05 29 09 ff ff 01 01 01 02 20 01 01 01 01 01 01 02 04 01 01 01
+//!  K:  83 9d ce                 (crc 0xcece = 11 | 0011101 | 1001110)
+//!  00
+//! ```
+//!
+//! The Teensy echoes the command with `cmd_success` = 1 (done) or 0 (refused) in the same format
+//! ([`CmdMsg::reply`]). [`CmdMsg::decode_robust`] checks, in this order:
+//!
+//! 1. the length and the trailing 0x00 → [`RejectReason::Framing`];
+//! 2. the check bytes: bit 7 clear in one of them, or a bit of 6..2 set in `K0` →
+//!    [`RejectReason::Crc`];
+//! 3. the CRC over `S` against the value the check bytes carry → [`RejectReason::Crc`];
+//! 4. COBS undone on `S` (a code chain that does not end exactly at the end of `S`, or a zero
+//!    inside) → [`RejectReason::Framing`];
+//! 5. the version byte → [`RejectReason::Version`];
+//! 6. `cmd_type` → [`RejectReason::Decode`].
+//!
+//! The crate's own one-block COBS encoder (`stuff_into`) makes `S`, and its decoder
+//! (`unstuff`) reads and writes only at fixed positions; Kani proves that the decoder inverts the
+//! encoder and is total (`teensy::verification`); the tests cross-check both against the
+//! crate `corncobs`.
+//!
+//! ## Why the CRC covers the bytes as sent
+//!
+//! Version 1 of this frame was `COBS(1 | CmdMsg | CRC-16 LE over 1 | CmdMsg) | 0x00`: a CRC over
+//! the body *before* COBS. Such a CRC does not cover the COBS code bytes. A code byte says where
+//! the decoder puts the body's next zero, so one flipped bit in a code byte moves zeros: the frame
+//! can still decode to a body of the right length whose error is several bytes at positions that
+//! depend on the content, and a 16-bit CRC passes such a multi-byte pattern about once in 2¹⁶.
+//! A search over 5.6·10⁸ random one-motor frames (every single-bit flip of each,
+//! 4.5·10⁹ flips) found 8 flips that version 1 accepted, for instance bit 2 of byte 17 of
+//!
+//! ```text
+//!  02 01 01 01 01 05 29 09 ff ff 01 01 01 02 20 01 01 01 01 01 01 02 04 01 01 03 02 32 00
+//! ```
+//!
+//! (the command above; the code byte 0x01 becomes 0x05), which decodes to the same command with
+//! `mtr_accel_deg_s_s` 33620225 and `cmd_success` 50397440 (test
+//! `a_code_byte_flip_the_body_crc_missed_is_refused`).
+//!
+//! Version 2 checks the CRC over the stuffed bytes before anything is unstuffed, so a flipped bit
+//! is judged on the wire, where it is one bit:
+//!
+//! - a flip in `S` is a one-bit error of the CRC's codeword, which CRC-16/CCITT-FALSE always
+//!   catches (it catches every burst of up to 16 bits within `S`: test
+//!   `every_burst_within_the_stuffed_bytes_changes_the_crc`);
+//! - a flip in `K` either breaks a fixed bit (bit 7 of each, bits 6..2 of `K0`) or changes the
+//!   16-bit value the check bytes carry, which then differs from the CRC of the unchanged `S`;
+//! - a flip of the 0x00 leaves no terminator.
+//!
+//! Whether an error pattern is caught does not depend on the frame's content (the CRC is affine
+//! over GF(2), see `crc16::verification`, and the check bytes' fixed bits are checked by place),
+//! so checking every single-bit flip of one frame of a
+//! length checks every frame of that length: the Kani harness `verify_bit_flip_refused` does that
+//! for one motor, and the tests for 1, 4 and 16 motors.
+//!
+//! The check bytes carry 7 bits each so that none of them is ever 0x00 (COBS framing stays
+//! intact) without a second COBS pass over the CRC.
 //!
 //! # Mapping onto the safety core
 //!
@@ -71,10 +135,13 @@ use statemachine::{AxisCommand, Command, Event, RejectReason};
 
 /// The largest motor count supported by the robust stream decoder's buffer.
 pub const MAX_MOTORS: usize = 16;
-/// Version byte of the robust successor frame.
-pub const ROBUST_VERSION: u8 = 1;
+/// Version byte of the robust successor frame (2: the CRC covers the stuffed bytes; see the module
+/// documentation for why version 1's layout was replaced).
+pub const ROBUST_VERSION: u8 = 2;
 /// The legacy delimiter.
 pub const DELIMITER: u8 = b'\n';
+/// Check bytes of a robust frame: the CRC's 16 bits, 7 per byte, bit 7 of each set.
+pub const CHECK_LEN: usize = 3;
 
 /// Bytes of `CmdMsg` with `n` motors (`sizeof(CmdMsg)`).
 pub const fn msg_len(n: usize) -> usize {
@@ -86,24 +153,25 @@ pub const fn legacy_len(n: usize) -> usize {
     msg_len(n).saturating_add(1)
 }
 
-/// Bytes before COBS of a robust frame with `n` motors: version, message, CRC.
+/// Bytes before COBS of a robust frame with `n` motors: the version and the message.
 pub const fn robust_body_len(n: usize) -> usize {
-    msg_len(n).saturating_add(3)
+    msg_len(n).saturating_add(1)
 }
 
-/// Bytes of every robust frame with `n` motors, COBS code bytes and the 0x00 terminator included.
-///
-/// COBS adds one code byte per started run of 254 bytes, so a body shorter than 254 bytes (as it
-/// is up to [`MAX_MOTORS`], checked below) always encodes to exactly its length + 2: the largest
-/// encoding is the only one.
+/// Bytes of the stuffed part `S` of a robust frame with `n` motors: the body and one COBS code
+/// byte (the body is one COBS block, fewer than 254 bytes, checked below). The CRC covers these.
+pub const fn stuffed_len(n: usize) -> usize {
+    robust_body_len(n).saturating_add(1)
+}
+
+/// Bytes of every robust frame with `n` motors: `S`, the three check bytes and the 0x00 terminator.
 pub const fn robust_len(n: usize) -> usize {
-    corncobs::max_encoded_len(robust_body_len(n))
+    stuffed_len(n).saturating_add(CHECK_LEN).saturating_add(1)
 }
 
 const _: () = assert!(
-    robust_body_len(MAX_MOTORS) < 254
-        && robust_len(MAX_MOTORS) == robust_body_len(MAX_MOTORS).saturating_add(2),
-    "robust frames must stay one COBS run long, so that their length is fixed"
+    robust_body_len(MAX_MOTORS) < 254,
+    "robust frame bodies must stay one COBS block long, so that their length is fixed"
 );
 
 /// Room for the body of a robust frame of any motor count.
@@ -111,6 +179,29 @@ const ROBUST_BODY_BUF: usize = robust_body_len(MAX_MOTORS);
 
 /// The stream decoder's buffer: the largest robust frame of [`MAX_MOTORS`] motors.
 pub const ROBUST_BUF: usize = robust_len(MAX_MOTORS);
+
+/// The check bytes of a robust frame for the CRC `crc`: `[0x80 | crc >> 14, 0x80 | (crc >> 7) &
+/// 0x7F, 0x80 | crc & 0x7F]`. None is 0x00, and in the first only bits 7, 1 and 0 can be set.
+pub const fn check_bytes(crc: u16) -> [u8; CHECK_LEN] {
+    let [hi, lo] = crc.to_be_bytes();
+    [
+        0x80 | (hi >> 6),
+        0x80 | ((hi << 1) & 0x7E) | (lo >> 7),
+        0x80 | (lo & 0x7F),
+    ]
+}
+
+/// The CRC that check bytes carry, or `None` if they are not check bytes: bit 7 clear in one of
+/// them, or one of bits 6..2 set in the first. The inverse of [`check_bytes`].
+pub const fn check_value(k: [u8; CHECK_LEN]) -> Option<u16> {
+    let [k0, k1, k2] = k;
+    if k0 & 0xFC != 0x80 || k1 & 0x80 == 0 || k2 & 0x80 == 0 {
+        return None;
+    }
+    let hi = ((k0 & 0x03) << 6) | ((k1 & 0x7F) >> 1);
+    let lo = ((k1 & 0x01) << 7) | (k2 & 0x7F);
+    Some(u16::from_be_bytes([hi, lo]))
+}
 
 /// Command types (`enum CmdType`, 32-bit on the wire). Values fixed by the seed.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
@@ -246,42 +337,56 @@ impl<const N: usize> CmdMsg<N> {
         }
     }
 
-    /// Writes the robust frame (COBS, 0x00 terminator included); `None` if `out` is shorter than
+    /// Writes the robust frame (`S`, check bytes, 0x00 terminator); `None` if `out` is shorter than
     /// [`Self::ROBUST_LEN`].
     pub fn encode_robust(&self, out: &mut [u8]) -> Option<usize> {
         let mut body = [0u8; ROBUST_BODY_BUF];
         let n = self.encode_body(&mut body)?;
-        let out = out.get_mut(..Self::ROBUST_LEN)?;
-        Some(corncobs::encode_buf(body.get(..n)?, out))
+        let frame = out.get_mut(..Self::ROBUST_LEN)?;
+        let (stuffed, rest) = frame.split_at_mut_checked(stuffed_len(N))?;
+        stuff_into(body.get(..n)?, stuffed)?;
+        let (check, end) = rest.split_first_chunk_mut::<CHECK_LEN>()?;
+        *check = check_bytes(crc16::checksum(stuffed));
+        *end.first_mut()? = 0;
+        Some(Self::ROBUST_LEN)
     }
 
-    /// Writes the robust frame's body before COBS (version, message, CRC); returns its length
+    /// Writes the robust frame's body before COBS (version, message); returns its length
     /// ([`robust_body_len`]`(N)`).
     pub(crate) fn encode_body(&self, body: &mut [u8; ROBUST_BODY_BUF]) -> Option<usize> {
         let () = Self::FITS;
         let body = body.get_mut(..robust_body_len(N))?;
         let (version, rest) = body.split_first_mut()?;
         *version = ROBUST_VERSION;
-        let n = self.encode_raw(rest)?;
-        let covered = n.saturating_add(1);
-        let crc = crc16::checksum(body.get(..covered)?);
-        body.get_mut(covered..)?.copy_from_slice(&crc.to_le_bytes());
+        self.encode_raw(rest)?;
         Some(body.len())
     }
 
-    /// Reads one robust frame: COBS bytes ending with the 0x00 terminator and containing no other zero.
+    /// Reads one robust frame, in the order of the module documentation: length and terminator →
+    /// `Framing`; check bytes, then the CRC over the stuffed bytes → `Crc`; COBS → `Framing`;
+    /// version → `Version`; the message → `Decode`.
     pub fn decode_robust(frame: &[u8]) -> Result<Self, RejectReason> {
         let () = Self::FITS;
         // Every frame of ours has the same length (see `robust_len`); checked first, so that
-        // COBS only ever decodes that many bytes.
+        // the CRC and COBS only ever see that many bytes.
         if frame.len() != Self::ROBUST_LEN || frame.last() != Some(&0) {
             return Err(RejectReason::Framing);
         }
+        let (stuffed, rest) = frame
+            .split_at_checked(stuffed_len(N))
+            .ok_or(RejectReason::Framing)?;
+        let check = rest
+            .first_chunk::<CHECK_LEN>()
+            .ok_or(RejectReason::Framing)?;
+        let sent = check_value(*check).ok_or(RejectReason::Crc)?;
+        if crc16::checksum(stuffed) != sent {
+            return Err(RejectReason::Crc);
+        }
         let mut body = [0u8; ROBUST_BODY_BUF];
-        let n = unstuff(frame, &mut body).ok_or(RejectReason::Framing)?;
-        // `n` is the fixed body length here (the frame's was checked); slicing by the constant
-        // keeps every length below known to Kani's solver, which does not carry `n`'s value over
-        // from the check.
+        // `unstuff` returns the body length, `stuffed.len() − 1` = `robust_body_len(N)` here;
+        // slicing by the constant keeps every length below known to Kani's solver, which does not
+        // carry `n`'s value over from the check.
+        let n = unstuff(stuffed, &mut body).ok_or(RejectReason::Framing)?;
         if n != robust_body_len(N) {
             return Err(RejectReason::Framing);
         }
@@ -291,22 +396,13 @@ impl<const N: usize> CmdMsg<N> {
         )
     }
 
-    /// Reads a robust frame's body after COBS: length → `Framing`, CRC → `Crc`, version →
-    /// `Version`, then the message.
+    /// Reads a robust frame's body after COBS: length → `Framing`, version → `Version`, then the
+    /// message (`cmd_type` → `Decode`).
     pub(crate) fn decode_body(body: &[u8]) -> Result<Self, RejectReason> {
-        let n = body.len();
-        if n != robust_body_len(N) {
+        if body.len() != robust_body_len(N) {
             return Err(RejectReason::Framing);
         }
-        // Split at the constant rather than at `n` (equal here), as in `decode_robust`.
-        let (covered, crc) = body
-            .split_at_checked(robust_body_len(N).saturating_sub(2))
-            .ok_or(RejectReason::Framing)?;
-        let stored = <[u8; 2]>::try_from(crc).map_err(|_| RejectReason::Framing)?;
-        if crc16::checksum(covered) != u16::from_le_bytes(stored) {
-            return Err(RejectReason::Crc);
-        }
-        match covered.split_first() {
+        match body.split_first() {
             Some((&ROBUST_VERSION, msg)) => Self::decode_raw(msg),
             Some(_) => Err(RejectReason::Version),
             None => Err(RejectReason::Framing),
@@ -332,25 +428,54 @@ impl<const N: usize> CmdMsg<N> {
     }
 }
 
-/// Undoes COBS for a frame of a single block (`code, data…, 0x00`, fewer than 254 data bytes, as
-/// every robust frame is): writes the body into `out` and returns its length (`frame.len() − 2`).
+/// COBS for a body of a single block (fewer than 254 bytes, as every robust frame body is), without
+/// a terminator: writes `code, data…` (`body.len() + 1` bytes, none of them zero) into `out` and
+/// returns that length.
 ///
-/// In such a frame every code byte stands where the body has a zero, so byte `p` of the frame
-/// (1 ≤ p ≤ len − 2) decodes to body byte `p − 1`: a zero where a code stands, the frame byte
-/// elsewhere. The first code is byte 0; each code `c` at `p` puts the next one at `p + c`, and the
-/// chain must end exactly on the terminator. `None` for anything else: no terminator, a zero
-/// before it, a chain that overshoots or stops short, 254 or more data bytes (which would need
-/// the 0xFF code), or `out` too short.
+/// Every zero of `body` is replaced by the distance to the next zero (or to the end of the block,
+/// one past the last byte), and a code byte giving the distance to the first zero goes in front.
+/// Written backwards from the end, at fixed positions only. `None` if the body is too long for one
+/// block or `out` too short.
 ///
-/// corncobs, which encodes these frames, also decodes them, but by copying each run with a
-/// length read from the frame; this byte-by-byte form reads and writes only at fixed positions,
-/// which is what lets Kani prove the decoder total over every input. The tests check that both
-/// decoders agree.
-pub(crate) fn unstuff(frame: &[u8], out: &mut [u8]) -> Option<usize> {
-    let (&first, rest) = frame.split_first()?;
-    let (&0, data) = rest.split_last()? else {
+/// [`unstuff`] inverts it (proven: `verify_unstuff_inverts_stuff`); the tests check that it writes
+/// what `corncobs::encode_buf` writes before the terminator.
+pub(crate) fn stuff_into(body: &[u8], out: &mut [u8]) -> Option<usize> {
+    let n = body.len();
+    if n >= 254 {
         return None;
-    };
+    }
+    let block = out.get_mut(..=n)?;
+    let (code, data) = block.split_first_mut()?;
+    // Position in the block of the next zero of the body (a code byte), or the block's end.
+    let mut next = n.saturating_add(1);
+    for (i, (o, &b)) in data.iter_mut().zip(body).enumerate().rev() {
+        let p = i.saturating_add(1);
+        if b == 0 {
+            *o = u8::try_from(next.saturating_sub(p)).ok()?;
+            next = p;
+        } else {
+            *o = b;
+        }
+    }
+    *code = u8::try_from(next).ok()?;
+    Some(n.saturating_add(1))
+}
+
+/// Undoes COBS for a single block without a terminator (`code, data…`, fewer than 254 data bytes,
+/// as `S` of every robust frame is): writes the body into `out` and returns its length
+/// (`stuffed.len() − 1`).
+///
+/// In such a block every code byte stands where the body has a zero, so byte `p` of the block
+/// (1 ≤ p ≤ len − 1) decodes to body byte `p − 1`: a zero where a code stands, the block byte
+/// elsewhere. The first code is byte 0; each code `c` at `p` puts the next one at `p + c`, and the
+/// chain must end exactly one past the last byte. `None` for anything else: an empty block, a zero
+/// byte, a chain that overshoots or stops short, 254 or more data bytes (which would need the 0xFF
+/// code), or `out` too short.
+///
+/// This byte-by-byte form reads and writes only at fixed positions, which is what lets Kani prove
+/// the decoder total over every input. The tests check that it agrees with corncobs' decoder.
+pub(crate) fn unstuff(stuffed: &[u8], out: &mut [u8]) -> Option<usize> {
+    let (&first, data) = stuffed.split_first()?;
     if data.len() >= 254 || out.len() < data.len() {
         return None;
     }
@@ -399,7 +524,7 @@ pub struct RobustStats {
 /// current run and nothing else. After `push(b[k])`:
 ///
 /// 1. if `b[k]` is 0x00 and the `L − 1` bytes before it are non-zero, `push` returns
-///    `Some(CmdMsg::decode_robust(b[k+1−L ..= k]))`. A frame whose COBS structure and CRC are
+///    `Some(CmdMsg::decode_robust(b[k+1−L ..= k]))`. A frame whose CRC and COBS structure are
 ///    good is thus delivered at its 0x00, as `Ok(command)` or the message's error
 ///    ([`RejectReason::Version`], [`RejectReason::Decode`]), whatever non-zero bytes came
 ///    before it: those are dropped and counted in [`RobustStats::dropped_bytes`];
@@ -413,7 +538,7 @@ pub struct RobustStats {
 /// `fuzz_teensy_stream_holds_back_no_frame`.
 ///
 /// ```text
-///  bytes:  13 37 02 5A … 3B 00 02 5A … 3B 00
+///  bytes:  13 37 03 02 … D9 00 03 02 … D9 00
 ///          └───┘ └───────────┘ └───────────┘
 ///          dropped  a frame     the next one
 /// ```
@@ -422,8 +547,8 @@ pub struct RobustStats {
 /// without a 0x00 between (13 37) are dropped and counted.
 ///
 /// Per byte: a non-zero byte is stored, moving the `L − 2` bytes kept when the run is longer
-/// than `L − 1`; a 0x00 decodes at most one frame (one COBS pass and one CRC over `L − 3`
-/// bytes).
+/// than `L − 1`; a 0x00 decodes at most one frame (one CRC over the `L − 4` stuffed bytes and,
+/// if it matches, one COBS pass).
 #[derive(Clone, Debug)]
 pub struct RobustDecoder<const N: usize> {
     /// The bytes held are `buf[..len]`: the last non-zero bytes since the last 0x00, at most

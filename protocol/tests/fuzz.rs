@@ -216,17 +216,22 @@ fn fuzz_teensy() {
                 let n = m.encode_robust(&mut out).unwrap();
                 assert_eq!(Msg::decode_robust(&out[..n]), Ok(m));
             }
-            // Any version and message bytes in a body with a good CRC, COBS-stuffed: the frame
-            // layer accepts it, so the answer is a command or a version or message error, never
-            // Framing or Crc; a command re-encodes to one that decodes the same.
+            // Any version and message bytes in a body, COBS-stuffed, with the check bytes of a good
+            // CRC over the stuffed bytes: the frame layer accepts it, so the answer is a command or
+            // a version or message error, never Framing or Crc; a command re-encodes to one that
+            // decodes the same.
             const BODY: usize = teensy::robust_body_len(4);
+            const S: usize = teensy::stuffed_len(4);
             let mut body = [0u8; BODY];
-            let n = input.len().min(BODY - 2);
+            let n = input.len().min(BODY);
             body[..n].copy_from_slice(&input[..n]);
-            let crc = crc16::checksum(&body[..BODY - 2]);
-            body[BODY - 2..].copy_from_slice(&crc.to_le_bytes());
             let mut frame = [0u8; Msg::ROBUST_LEN];
-            let len = corncobs::encode_buf(&body, &mut frame);
+            // corncobs writes S and a terminator; the check bytes go over that terminator.
+            assert_eq!(corncobs::encode_buf(&body, &mut frame), S + 1);
+            let crc = crc16::checksum(&frame[..S]);
+            frame[S..S + 3].copy_from_slice(&teensy::check_bytes(crc));
+            frame[S + 3] = 0;
+            let len = Msg::ROBUST_LEN;
             match Msg::decode_robust(&frame[..len]) {
                 Ok(m) => {
                     let mut out = [0u8; teensy::ROBUST_BUF];
@@ -512,7 +517,7 @@ fn fuzz_teensy_stream_holds_back_no_frame() {
 const _: () = assert!(
     amr::FRAME_LEN == 64
         && 2 * cdc::MAX_FRAME_LEN == 522
-        && 3 * teensy::ROBUST_BUF == 267
+        && 3 * teensy::ROBUST_BUF == 270
         && pi_spi::RX_LEN <= 512
         && pi_spi::TX_LEN <= 512,
     "update the -max_len of the fuzz targets in xtask/src/fuzz.rs"

@@ -68,7 +68,7 @@ pub const TARGETS: [Target; 9] = [
         64,
     ),
     // 3 × teensy::ROBUST_BUF
-    t("protocol", "fuzz", "fuzz_teensy", 267),
+    t("protocol", "fuzz", "fuzz_teensy", 270),
     t(
         "protocol",
         "fuzz",

@@ -465,12 +465,26 @@ fn crc_errors_report_reason_code_and_both_crcs() {
         e.contains("cdc error Crc (code 1)") && e.contains("STATUS err CrcError (1)"),
         "{e}"
     );
-    // Robust Teensy: the golden frame with its last CRC byte changed (0x65 → 0x66).
+    // Robust Teensy: the golden frame (protocol/golden/structs_python.txt) with its last check byte
+    // changed (0xf0 → 0xf1). The check bytes 83 ff f0 carry 0b11 | 1111111 | 1110000 = 0xfff0, the
+    // CRC of the unchanged stuffed bytes; f1 carries 0xfff1.
     let golden =
-        "020101010102010101025a010107a6ffffff0a0a0106ffffff7f1e010106c4ffffff010101030d6500";
-    let e = err(FrameKind::TeensyRobust, &golden.replace("0d6500", "0d6600"));
+        "020201010102010101025a010107a6ffffff0a0a0106ffffff7f1e010106c4ffffff0101010183fff000";
+    let e = err(
+        FrameKind::TeensyRobust,
+        &golden.replace("83fff000", "83fff100"),
+    );
     assert!(
-        e.contains("Crc") && e.contains("computed 0x650d") && e.contains("carries 0x660d"),
+        e.contains("Crc") && e.contains("computed 0xfff0") && e.contains("carries 0xfff1"),
+        "{e}"
+    );
+    // A check byte with bit 7 clear carries no CRC at all.
+    let e = err(
+        FrameKind::TeensyRobust,
+        &golden.replace("83fff000", "03fff000"),
+    );
+    assert!(
+        e.contains("Crc") && e.contains("check bytes 03fff0 carry no CRC"),
         "{e}"
     );
 }
@@ -624,17 +638,25 @@ fn teensy_errors_name_cmd_type_version_and_delimiter() {
         e.contains("Framing") && e.contains("0x0b") && e.contains("ends in 0x0a"),
         "{e}"
     );
-    // Robust frame with version 2 and a correct CRC, built here from the seed layout.
+    // Robust frame with version 3 and a correct CRC, built here from the layout: COBS of the
+    // version and CmdMsg without its terminator, the CRC of those bytes in 2 + 7 + 7 bits with bit
+    // 7 set, then 00.
     let msg = &parse_hex(&legacy).unwrap()[..36];
-    let mut body = vec![2u8];
+    let mut body = vec![3u8];
     body.extend_from_slice(msg);
-    let crc = protocol::crc16::checksum(&body);
-    body.extend_from_slice(&crc.to_le_bytes());
     let mut frame = vec![0u8; corncobs::max_encoded_len(body.len())];
     let n = corncobs::encode_buf(&body, &mut frame);
-    let e = err(FrameKind::TeensyRobust, &to_hex(&frame[..n]));
+    frame.truncate(n - 1);
+    let crc = protocol::crc16::checksum(&frame);
+    frame.extend_from_slice(&[
+        0x80 | (crc >> 14) as u8,
+        0x80 | ((crc >> 7) & 0x7F) as u8,
+        0x80 | (crc & 0x7F) as u8,
+        0,
+    ]);
+    let e = err(FrameKind::TeensyRobust, &to_hex(&frame));
     assert!(
-        e.contains("Version") && e.contains("version byte is 2"),
+        e.contains("Version") && e.contains("version byte is 3, this build speaks 2"),
         "{e}"
     );
 }

@@ -184,7 +184,7 @@ fn a_command_waits_for_its_own_ack() {
 // ---- seed 003 ----
 
 const ROBUST: &str =
-    "020101010102010101025a010107a6ffffff0a0a0106ffffff7f1e010106c4ffffff010101030d6500";
+    "020201010102010101025a010107a6ffffff0a0a0106ffffff7f1e010106c4ffffff0101010183fff000";
 
 fn golden_cmd() -> teensy::CmdMsg<4> {
     teensy::CmdMsg {

@@ -4,11 +4,18 @@
 //! | link | CRC stored | caught: every burst of up to |
 //! |---|---|---|
 //! | seed 000 SPI frame | big-endian (codeword order) | 16 bits, anywhere in the frame |
-//! | seed 001 CDC frame, Teensy robust frame | little-endian (seed 001's rule) | 12 bits, anywhere |
+//! | seed 001 CDC frame | little-endian (seed 001's rule) | 12 bits, anywhere |
 //!
 //! With the CRC stored little-endian its two bytes are swapped against the codeword order, and a
 //! 13-bit burst that ends in the low CRC byte can pass (`every_burst_by_byte_order` finds the
 //! shortest one at every checked length). Every single-bit error is caught in both orders.
+//!
+//! The Teensy robust frame (version 2) stores its CRC in neither order: 7 bits per check byte, each
+//! with bit 7 set, after the stuffed bytes it covers. An error confined to those stuffed bytes
+//! leaves the stored value alone, so it passes only if its pattern is a multiple of the generator
+//! polynomial, which no burst of up to 16 bits is (whatever the length; the test
+//! `every_burst_within_the_stuffed_bytes_changes_the_crc` enumerates every motor count's). A flip in the
+//! check bytes is refused by their own encoding (`teensy::verification`, `check_check_bytes`).
 //!
 //! # Why checking error patterns alone is enough
 //!
@@ -25,7 +32,8 @@ use statemachine::harness::Source;
 use statemachine::{assume, cover};
 
 /// Longest run of covered bytes checked: the seed 000 frame body (62 bytes), which is longer than
-/// every seed 001 frame of the seed's messages and every Teensy robust frame body.
+/// every seed 001 frame of the seed's messages and the Teensy robust frame's stuffed bytes up to 10
+/// motors (22 + 4·N bytes).
 pub(crate) const MAX_COVERED: usize = 62;
 
 /// The error in a codeword of `n` covered bytes followed by the CRC: a burst of at most `max_bits`
@@ -66,7 +74,7 @@ fn syndrome(e: &[u8; MAX_COVERED + 2], n: usize, order: Order, zeros_crc: u16) -
 pub(crate) enum Order {
     /// Most significant byte first: seed 000.
     Big,
-    /// Least significant byte first: seeds 001 and the Teensy robust frame.
+    /// Least significant byte first: seed 001.
     Little,
 }
 
