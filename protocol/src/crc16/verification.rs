@@ -184,8 +184,9 @@ pub(crate) mod model {
 
     /// How many distinct inputs [`uninterpreted_checksum`] remembers: more than any harness calls it.
     const REMEMBERED: usize = 4;
-    /// The longest input it remembers: a whole seed 000 frame's covered bytes.
-    const REMEMBERED_LEN: usize = 62;
+    /// The longest input it remembers: a seed 000 frame's 62 covered bytes, a Teensy robust frame's
+    /// stuffed bytes (up to 86).
+    const REMEMBERED_LEN: usize = 96;
 
     /// What [`uninterpreted_checksum`] has answered so far: (input length, input bytes, value).
     static mut ANSWERS: [(usize, [u8; REMEMBERED_LEN], u16); REMEMBERED] =

@@ -107,10 +107,10 @@ pub(crate) fn check_round_trip(src: &mut impl Source) {
 }
 
 /// P-6: encode → decode of the robust frame gives back the same command, and the frame has the
-/// fixed length. Under Kani the CRC is replaced by a pure function of the bytes
-/// (`crc16::verification::model::pure_checksum`): the round trip needs only that the receiver
-/// computes over the same stuffed bytes the value the sender computed, true of every pure function
-/// and so of the real CRC (no state). The pieces it composes are proven on their own too:
+/// fixed length. Under Kani the CRC is an uninterpreted function of the bytes
+/// (`crc16::verification::model::uninterpreted_checksum`: any value, the same for the same bytes):
+/// the round trip needs only that the receiver computes over the same stuffed bytes the value the
+/// sender computed, so it holds for every pure function and so for the real CRC (no state). The pieces it composes are proven on their own too:
 /// [`check_body_round_trip`], [`check_unstuff_inverts_stuff`], [`check_check_bytes`].
 pub(crate) fn check_robust_round_trip(src: &mut impl Source) {
     let m = any_msg(src);
@@ -640,7 +640,7 @@ pub(crate) fn check_legacy_round_trip(src: &mut impl Source) {
 ///
 /// The robust decoder is proven total (`verify_robust_total`, with the CRC replaced by any value,
 /// `verify_unstuff_total`, and `verify_robust_push_step`, the stream decoder's induction step). The
-/// robust round trip is proven whole with the CRC replaced by a pure function
+/// robust round trip is proven whole with the CRC an uninterpreted function
 /// (`verify_robust_round_trip`) and in pieces with nothing replaced: the body before COBS
 /// (`verify_body_round_trip`), one-block COBS (`verify_unstuff_inverts_stuff`) and the check bytes
 /// (`verify_check_bytes`). A flipped bit is refused in every frame of one motor
@@ -689,13 +689,13 @@ mod proofs {
         check_check_bytes(&mut KaniSource);
     }
 
-    /// The whole robust round trip of one motor, the CRC replaced by a pure function of the bytes
+    /// The whole robust round trip of one motor, the CRC an uninterpreted function of the bytes
     /// (sound for a round trip: see [`check_robust_round_trip`]).
     #[kani::proof]
     #[kani::unwind(31)]
     #[kani::stub(
         crate::crc16::checksum,
-        crate::crc16::verification::model::pure_checksum
+        crate::crc16::verification::model::uninterpreted_checksum
     )]
     fn verify_robust_round_trip() {
         check_robust_round_trip(&mut KaniSource);
@@ -749,7 +749,7 @@ mod proofs {
         kani_pending,
         kani::stub(
             crate::crc16::checksum,
-            crate::crc16::verification::model::pure_checksum
+            crate::crc16::verification::model::uninterpreted_checksum
         )
     )]
     fn verify_stream_delivers_frame() {
