@@ -1,5 +1,9 @@
 //! Kani harnesses of the seed 003 packets and their `cargo test` twins.
 
+// Under Kani the bodies that only twins call, and the stand-ins that only `kani::stub` names,
+// are unused as far as rustc can see.
+#![cfg_attr(kani, allow(dead_code))]
+
 use super::*;
 use statemachine::harness::Source;
 use statemachine::{check, cover};
@@ -532,7 +536,9 @@ pub(crate) fn check_unstuff_inverts_stuff(src: &mut impl Source) {
         "P-6: unstuffing a stuffed body gives a body of the body length"
     );
     assert!(out == body, "P-6: unstuff gives back the body stuffed");
-    if !cfg!(kani) {
+    // corncobs is a dev-dependency: the Kani build, which has none, leaves the cross-check out.
+    #[cfg(not(kani))]
+    {
         let mut reference = [0u8; STUFFED + 1];
         assert!(
             corncobs::encode_buf(&body, &mut reference) == STUFFED + 1,
@@ -585,7 +591,8 @@ pub(crate) fn check_unstuff_total(src: &mut impl Source) {
             );
         }
     }
-    if !cfg!(kani) {
+    #[cfg(not(kani))]
+    {
         // corncobs' decoder on the block and a terminator, behind the no-zero check: the same
         // blocks accepted, the same bodies.
         let mut framed = [0u8; STUFFED + 2];
