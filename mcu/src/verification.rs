@@ -842,12 +842,17 @@ mod proofs {
     /// finite remainder by 2π, NaN otherwise. That over-approximates the real functions, whose
     /// ranges the test `mcu/tests/libm_ranges.rs` checks for every one of the 2³² f32 arguments;
     /// without the stand-ins their argument reduction (f64 arithmetic, a multi-word loop for large
-    /// arguments) is bit-blasted and the proof does not finish.
-    #[kani::proof]
-    #[kani::unwind(17)]
-    #[kani::stub(libm::sinf, super::libm_models::sinf)]
-    #[kani::stub(libm::cosf, super::libm_models::cosf)]
-    #[kani::stub(libm::remainderf, super::libm_models::remainderf)]
+    /// arguments) is bit-blasted. Pending all the same: with the stand-ins, two updates of 16
+    /// symbolic f32 (the matrix product, the arc factors, the compensated sums) had not finished
+    /// after 14 min (0.9 GB); the twin runs.
+    #[cfg_attr(kani_pending, kani::proof)]
+    #[cfg_attr(kani_pending, kani::unwind(17))]
+    #[cfg_attr(kani_pending, kani::stub(libm::sinf, super::libm_models::sinf))]
+    #[cfg_attr(kani_pending, kani::stub(libm::cosf, super::libm_models::cosf))]
+    #[cfg_attr(
+        kani_pending,
+        kani::stub(libm::remainderf, super::libm_models::remainderf)
+    )]
     fn verify_odometry_update_finite() {
         super::odometry_update_finite(&mut KaniSource);
     }
