@@ -116,11 +116,15 @@ fn kani_table(dir: &Path) -> Result<String, String> {
     }
     rows.sort_by(|a, b| a.harness.cmp(&b.harness));
     // The report and `trace` name a harness by its function name: two of one name would share a row.
-    if let Some(w) = rows.windows(2).find(|w| w[0].harness == w[1].harness) {
+    if let Some(pair) = rows
+        .iter()
+        .zip(rows.iter().skip(1))
+        .find(|(a, b)| a.harness == b.harness)
+    {
         return Err(format!(
             "{}: two harnesses named `{}`: rename one (the report names harnesses by function name)",
             dir.display(),
-            w[0].harness
+            pair.0.harness
         ));
     }
     let mut out = String::new();
