@@ -442,3 +442,42 @@ fn the_trace_records_one_rearm_per_arming_not_one_per_step() {
         "{records:?}"
     );
 }
+
+#[test]
+fn the_tick_clears_the_break_flag_only_while_braked() {
+    let mut b = Board::new();
+    b.drive_at(1.0);
+    assert_eq!(b.bridge.state, BridgeState::Run);
+    // While running the flag stays for the current loop to see and brake on.
+    b.bridge.tripped = true;
+    b.frame(1.0, 1.0, true, 0);
+    b.tick();
+    assert!(b.bridge.tripped);
+    // Braked (power-on BRAKE of a fresh board): the tick clears it; the comparator would set it
+    // again if the overcurrent were still there.
+    let mut b = Board::new();
+    b.bridge.tripped = true;
+    b.tick();
+    assert_eq!(b.bridge.state, BridgeState::Brake);
+    assert!(!b.bridge.tripped);
+}
+
+#[test]
+fn loops_that_reach_exactly_their_minimum_runs_keep_the_watchdog_fed() {
+    let mut b = Board::new();
+    let [min_current, min_speed] = AMR.min_runs_per_tick;
+    let mut inputs = TickInputs {
+        runs: mcu::Runs {
+            current: min_current,
+            speed: min_speed,
+        },
+        ..TickInputs::default()
+    };
+    assert!(b.tick.run(&mut b.safety, &inputs).feed_watchdog);
+    // One run short on the current loop only.
+    inputs.runs = mcu::Runs {
+        current: 2 * min_current - 1,
+        speed: 2 * min_speed,
+    };
+    assert!(!b.tick.run(&mut b.safety, &inputs).feed_watchdog);
+}
