@@ -162,11 +162,22 @@ fn estop_latches_and_only_its_release_then_an_enable_rearm() {
     send(&mut l, &mut s, &pwm([300; 4], 200));
     crate::serial::tick(&mut s, &Default::default());
     replies(&mut l);
-    send(&mut l, &mut s, &Message::Estop(Estop::Engage));
+    let driving = send(&mut l, &mut s, &pwm([300; 4], 200)).unwrap();
+    assert_eq!(
+        outputs_after_frame(&driving, 1000),
+        None,
+        "a frame that does not brake leaves the outputs to the tick"
+    );
+    let braked = send(&mut l, &mut s, &Message::Estop(Estop::Engage)).unwrap();
     assert_eq!(
         s.mode(),
         Mode::Brake,
         "ESTOP brakes in the step that received it"
+    );
+    assert_eq!(
+        outputs_after_frame(&braked, 1000),
+        Some([MotorOutput::short(1000); MOTORS]),
+        "and the motors are shorted in the same step"
     );
     assert_eq!(replies(&mut l), [ack(MsgId::Estop, ACK_OK)]);
     // Enable while the ESTOP is engaged: refused.

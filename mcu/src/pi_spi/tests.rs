@@ -579,3 +579,17 @@ fn odometry_is_zero_until_configured_then_follows_the_wheels_and_resets() {
     assert!(b.transfer(&bad).accepted);
     assert_eq!(b.app.updates().kinematics_refused, 1);
 }
+
+#[test]
+fn counts_become_radians_and_saturate_at_the_format_range() {
+    // One revolution is 2π rad, to within a Q16.16 step.
+    let rev = rad_of_counts(COUNTS_PER_REV as i32).to_num::<f64>();
+    assert!(
+        (rev - core::f64::consts::TAU).abs() < 2.0 / 65536.0,
+        "{rev}"
+    );
+    assert_eq!(rad_of_counts(0), Position::ZERO);
+    // 2³¹ counts are about 1.5 million revolutions, far beyond Q16.16's ±32 768 rad.
+    assert_eq!(rad_of_counts(i32::MAX), Position::MAX);
+    assert_eq!(rad_of_counts(i32::MIN), Position::MIN);
+}
