@@ -234,6 +234,14 @@ fn gains_are_converted_per_sample_and_refused_outside_their_bounds() {
     assert!((g[0].ki_dt.to_num::<f64>() - 0.1).abs() < 2e-5);
     assert!((g[0].kd_dt.to_num::<f64>() - 10.0).abs() < 2e-5);
     assert_eq!(g[0].out_limit, DUTY_LIMIT);
+    // Each maximum is allowed: the bounds are the largest gains, not the first refused ones.
+    let at_max = s(
+        SPEED_BOUNDS.kp_max,
+        SPEED_BOUNDS.ki_max,
+        SPEED_BOUNDS.kd_max,
+    );
+    let g = gains_from_wire(&at_max, &SPEED_BOUNDS).unwrap();
+    assert_eq!(g[0].kp, Q::from_num(SPEED_BOUNDS.kp_max));
     for (set, e) in [
         (s(f32::NAN, 1.0, 0.0), GainError::NonFinite),
         (s(1.0, f32::INFINITY, 0.0), GainError::NonFinite),
@@ -469,6 +477,8 @@ fn mav_holds_the_commanded_speed() {
         "bemf {}",
         fb.motor.bemf[0]
     );
+    // 3000 closed-loop ticks later every controller still satisfies its invariant.
+    assert!(b.app.loops().iter().all(MotorLoop::is_valid));
 }
 
 #[test]
