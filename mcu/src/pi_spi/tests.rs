@@ -603,3 +603,35 @@ fn counts_become_radians_and_saturate_at_the_format_range() {
     assert_eq!(rad_of_counts(i32::MAX), Position::MAX);
     assert_eq!(rad_of_counts(i32::MIN), Position::MIN);
 }
+
+/// An MTP axis far behind its profile: the position controller's correction (here its full
+/// 5 rad/s) is added to the profile's speed, and the sum is held to the ladder's cap before the
+/// speed controller sees it, in either direction.
+#[test]
+fn the_position_correction_never_lifts_the_speed_setpoint_above_the_cap() {
+    let travel = Travel {
+        lo: Position::from_num(-10),
+        hi: Position::from_num(10),
+    };
+    let lim = ProfileLimits {
+        travel,
+        accel_step: Speed::from_num(0.01),
+    };
+    let cap = Speed::from_num(1);
+    for sign in [1, -1] {
+        let goal = Position::from_num(sign);
+        let mut l = MotorLoop::new(&TUNING, &travel);
+        // Already closed, the profile resting on the goal, the motor 1 rad short of it.
+        l.closed = true;
+        l.profile = Trapezoid::new(goal, &travel);
+        let duty = l.run(
+            &AxisDrive::Position { target: goal, cap },
+            Speed::ZERO,
+            Position::ZERO,
+            &lim,
+        );
+        let mut speed_pid = Pid::new(TUNING.speed);
+        let want = speed_pid.step(cap * sign, Speed::ZERO);
+        assert_eq!(duty, Some(want), "goal {goal}");
+    }
+}
