@@ -493,9 +493,19 @@ fn mtp_reaches_its_goal_under_the_cap_and_reports_done() {
     };
     b.arm(&rx);
     let mut fastest = 0.0f64;
-    for _ in 0..600 {
+    for k in 0..600 {
         let s = stream(&mut b, &rx, 10);
         fastest = fastest.max(s[0].abs());
+        if k == 100 {
+            // 1 s into the 4 s move of motors 0 and 1: not done yet.
+            let fb = b.transfer_bytes(&bytes(&rx)).1;
+            assert_eq!(
+                fb.motor.done & 0b0011,
+                0,
+                "done early: {:#06b}",
+                fb.motor.done
+            );
+        }
     }
     assert!(
         fastest <= std::f64::consts::PI * 1.1,
