@@ -645,3 +645,29 @@ fn the_position_correction_never_lifts_the_speed_setpoint_above_the_cap() {
         assert_eq!(duty, Some(want), "goal {goal}");
     }
 }
+
+#[test]
+fn done_needs_the_loop_closed_the_profile_on_the_goal_and_the_motor_within_tolerance() {
+    let travel = Travel {
+        lo: Position::from_num(-10),
+        hi: Position::from_num(10),
+    };
+    let lim = ProfileLimits {
+        travel,
+        accel_step: Speed::from_num(0.01),
+    };
+    let goal = Position::from_num(1);
+    let tol = rad_of_counts(DONE_TOLERANCE_COUNTS);
+    let mut l = MotorLoop::new(&TUNING, &travel);
+    l.profile = Trapezoid::new(goal, &travel);
+    assert!(!l.done(goal, goal, &lim), "open loop");
+    l.closed = true;
+    assert!(l.done(goal, goal, &lim));
+    assert!(l.done(goal, goal + tol, &lim));
+    assert!(
+        !l.done(goal, goal + tol + tol, &lim),
+        "motor short of the goal"
+    );
+    l.profile = Trapezoid::new(Position::ZERO, &travel);
+    assert!(!l.done(goal, goal, &lim), "profile not on the goal");
+}
