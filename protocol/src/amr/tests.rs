@@ -488,3 +488,24 @@ fn padding_check_covers_exactly_the_bytes_between_payload_and_crc() {
     assert!(padding_is_zero(&f, CRC_OFFSET));
     assert!(padding_is_zero(&f, usize::MAX));
 }
+
+#[test]
+fn with_output_fills_mode_and_fault_flags_and_keeps_the_rest() {
+    let out = statemachine::Output::<2> {
+        mode: statemachine::Mode::Stop,
+        drive: statemachine::Drive::Brake,
+        limit: statemachine::Speed::ZERO,
+        faults: statemachine::FaultFlags::COMM_LOST.union(statemachine::FaultFlags::ESTOP),
+        age: 7,
+    };
+    let fb = MotorFeedback {
+        seq: 41,
+        left_encoder: -3,
+        ..MotorFeedback::default()
+    }
+    .with_output(&out);
+    // STOP is rung 3 on the wire; COMM_LOST is bit 4 and ESTOP bit 5: 0x30.
+    assert_eq!(fb.mode, 3);
+    assert_eq!(fb.fault_flags, 0x30);
+    assert_eq!((fb.seq, fb.left_encoder), (41, -3));
+}
