@@ -575,6 +575,13 @@ fn odometry_is_zero_until_configured_then_follows_the_wheels_and_resets() {
         fb.odometry.pos_x
     );
     assert!(fb.odometry.pos_y.abs() < 1e-6 && fb.odometry.heading.abs() < 1e-6);
+    // 720 counts/s is π rad/s per wheel: vx = 0.0125 m · 4π rad/s = 0.157 m/s, over the
+    // odometry's own 10 ms period.
+    assert!(
+        (f64::from(fb.odometry.vx) - 0.05 * std::f64::consts::PI).abs() < 0.02,
+        "vx {}",
+        fb.odometry.vx
+    );
     let reset = RxBuffer {
         updates: UpdateFlags(UpdateFlags::ODOM_RESET),
         ..mav
@@ -670,4 +677,76 @@ fn done_needs_the_loop_closed_the_profile_on_the_goal_and_the_motor_within_toler
     );
     l.profile = Trapezoid::new(Position::ZERO, &travel);
     assert!(!l.done(goal, goal, &lim), "profile not on the goal");
+}
+
+#[test]
+fn a_pending_estop_press_shorts_the_motors_in_the_tick_before_the_ladder_knows() {
+    let mut b = Board::new();
+    b.arm(&pwm([200; 4]));
+    let o = b.tick();
+    assert_ne!(o.motors, [MotorOutput::short(FULL); MOTORS], "driving");
+    // The edge handler ran; the tick has not polled the input, so the ladder still runs.
+    b.estop.edge_then(true, || {});
+    let o = b.tick();
+    assert_ne!(o.out.drive, Drive::Brake);
+    assert_eq!(o.motors, [MotorOutput::short(FULL); MOTORS]);
+}
+
+#[test]
+fn shutdown_of_reads_the_motor_and_servo_bits_of_any_buffer() {
+    for (servos, motors) in [(false, true), (true, false), (true, true), (false, false)] {
+        let sd = Shutdown { servos, motors };
+        let raw = bytes(&RxBuffer {
+            system_shutdown: sd,
+            ..pwm([200; 4])
+        });
+        assert_eq!(shutdown_of(&raw), sd);
+    }
+}
+
+#[test]
+fn an_imu_reading_reaches_the_next_feedback() {
+    let mut b = Board::new();
+    // Level and still, raw temperature 0: 36.53 °C by the MPU6050 register map's raw / 340 + 36.53.
+    b.app.imu_sample(Some(([0, 0, 16_384], [0; 3], 0)));
+    let fb = b.transfer_bytes(&bytes(&RxBuffer::default())).1;
+    assert!(
+        (fb.imu.temperature - 36.53).abs() < 1e-4,
+        "{}",
+        fb.imu.temperature
+    );
+}
+
+#[test]
+fn orientation_and_imu_calibration_updates_count_only_under_their_flags() {
+    let mut b = Board::new();
+    // The default buffer's orientation matrices are all zeros: not rotations.
+    assert!(b.transfer(&RxBuffer::default()).accepted);
+    assert_eq!(b.app.updates().orientation_refused, 0, "no flag, no update");
+    assert_eq!(b.app.updates().save_imu_cal, 0);
+    let bad = RxBuffer {
+        updates: UpdateFlags(UpdateFlags::IMU_ORIENTATION),
+        ..RxBuffer::default()
+    };
+    assert!(b.transfer(&bad).accepted);
+    assert_eq!(b.app.updates().orientation_refused, 1);
+    let identity = [1, 0, 0, 0, 1, 0, 0, 0, 1];
+    let good = RxBuffer {
+        imu_gyro_orientation: identity,
+        imu_compass_orientation: identity,
+        ..bad
+    };
+    assert!(b.transfer(&good).accepted);
+    assert_eq!(
+        b.app.updates().orientation_refused,
+        1,
+        "a rotation is taken"
+    );
+    let save = RxBuffer {
+        updates: UpdateFlags(UpdateFlags::SAVE_IMU_CAL),
+        ..RxBuffer::default()
+    };
+    assert!(b.transfer(&save).accepted);
+    assert!(b.transfer(&RxBuffer::default()).accepted);
+    assert_eq!(b.app.updates().save_imu_cal, 1);
 }
