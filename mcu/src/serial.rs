@@ -139,6 +139,20 @@ mod tests {
     }
 
     #[test]
+    fn bytes_are_put_back_only_if_they_all_fit() {
+        let mut q = TxQueue::<4>::new();
+        assert!(q.push_frame(&[3, 4]));
+        // Room for 2: one byte back leaves room to spare, then two more do not fit.
+        assert!(q.push_front_all(&[2]));
+        assert!(!q.push_front_all(&[0, 1]));
+        assert_eq!(q.len(), 3);
+        assert!(q.push_front_all(&[1]));
+        assert!(!q.push_front_all(&[0]), "full");
+        let out: std::vec::Vec<u8> = core::iter::from_fn(|| q.pop()).collect();
+        assert_eq!(out, [1, 2, 3, 4]);
+    }
+
+    #[test]
     fn tick_latches_a_local_estop_and_an_undervoltage() {
         let mut s = Safety::<4>::new(statemachine::Config::CDC);
         let out = tick(

@@ -110,6 +110,21 @@ fn framing_errors() {
     let crc = crc16::checksum(&f[..62]);
     f[62..].copy_from_slice(&crc.to_be_bytes());
     assert_eq!(decode_command(&f), Err(RejectReason::Framing));
+    // Two equal non-zero padding bytes, whose XOR would be zero: the padding after the 2-byte
+    // payload is bytes 3..62, fourteen 4-byte words and a 3-byte tail. One pair in the same lane
+    // of two words, one pair in the tail.
+    for (a, b) in [(3, 7), (60, 61)] {
+        let mut f = frame_with(&V1);
+        f[a] = 0x5A;
+        f[b] = 0x5A;
+        let crc = crc16::checksum(&f[..62]);
+        f[62..].copy_from_slice(&crc.to_be_bytes());
+        assert_eq!(
+            decode_command(&f),
+            Err(RejectReason::Framing),
+            "padding bytes {a} and {b}"
+        );
+    }
 }
 
 #[test]
