@@ -120,12 +120,16 @@ mod tests {
     #[test]
     fn a_frame_is_queued_whole_or_dropped_and_counted() {
         let mut q = TxQueue::<8>::new();
+        assert_eq!(q.dropped(), 0);
         assert!(q.push_frame(&[1, 2, 3, 4, 5]));
+        assert!(!q.is_empty());
         assert!(
             !q.push_frame(&[6, 7, 8, 9]),
             "4 bytes do not fit in the 3 left"
         );
         assert_eq!(q.dropped(), 1);
+        assert!(!q.push_frame(&[6, 7, 8, 9]));
+        assert_eq!(q.dropped(), 2);
         assert!(q.push_frame(&[6, 7, 8]));
         let (a, b) = (q.pop(), q.pop());
         assert!(
