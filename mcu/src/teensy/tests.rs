@@ -200,6 +200,14 @@ fn config_sets_the_acceleration_within_the_profile() {
         None,
         "52 rad/s² is above the profile's 50"
     );
+    // The joints take a new acceleration; a zero or negative one is ignored.
+    let mut j = Joints::new([Position::ZERO; JOINTS], &cfg);
+    assert_eq!(j.accel(), cfg.params().max_cmd_step);
+    j.set_accel(a);
+    assert_eq!(j.accel(), a);
+    j.set_accel(Speed::ZERO);
+    j.set_accel(-a);
+    assert_eq!(j.accel(), a);
 }
 
 #[test]
