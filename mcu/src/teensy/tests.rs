@@ -256,8 +256,10 @@ fn brake_halts_the_motors_and_the_profiles_restart_from_them() {
             g.run();
         }
     }
-    // Moving: the next tick's target is ahead of the motors.
-    drive_joints(&mut j, &mut g, &run, false);
+    // Moving: the next tick's target is ahead of the motors, and it is the references in steps.
+    let t = drive_joints(&mut j, &mut g, &run, false);
+    assert_eq!(t, j.positions().map(steps_of));
+    assert!(t.iter().all(|&s| s > 0), "moving toward +3 rad: {t:?}");
     let at = g.position();
     let t = drive_joints(&mut j, &mut g, &Drive::Brake, false);
     assert_eq!(t, at, "halted where the motors stand");
