@@ -132,6 +132,10 @@ mod tests {
         assert_eq!(timer_divider(16_000_000, 1_000), Some((0, 15_999)));
         assert_eq!(timer_divider(84_000_000, 9), None);
         assert_eq!(timer_divider(84_000_000, 0), None);
+        // 1 000 001 Hz / 1 kHz = 1000.001: inexact, refused (not rounded to 1000).
+        assert_eq!(timer_divider(1_000_001, 1_000), None);
+        // A rate above the clock.
+        assert_eq!(timer_divider(1_000, 2_000), None);
         // 168 MHz centre-aligned at 20 kHz: 168e6 / 40e3 = 4200.
         assert_eq!(center_aligned_arr(168_000_000, 20_000), Some(4200));
         assert_eq!(center_aligned_arr(168_000_000, 1), None);
