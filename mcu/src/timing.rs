@@ -151,6 +151,9 @@ mod tests {
         assert_eq!(iwdg_timeout_us(0, 399, 17_000), 94_117);
         // 1 s needs /8: 32000·1/8 = 4000 → reload 3999.
         assert_eq!(iwdg_setting(1000, 32_000), Some((1, 3999)));
+        // And back: /8 · 4000 counts at 32 kHz is 1 s; /256 · 4096 is 32.768 s.
+        assert_eq!(iwdg_timeout_us(1, 3999, 32_000), 1_000_000);
+        assert_eq!(iwdg_timeout_us(6, 4095, 32_000), 32_768_000);
     }
 
     #[test]
