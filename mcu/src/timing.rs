@@ -166,6 +166,9 @@ mod tests {
         assert_eq!(micros(7, 84, true, 84_000, 1000), 8_001);
         // Flag set after a late count read: the count still belongs to tick 7.
         assert_eq!(micros(7, 83_990, true, 84_000, 1000), 7_999);
+        // Only a count below half a period is taken as after the wrap; half a period is before it.
+        assert_eq!(micros(7, 41_999, true, 84_000, 1000), 8_499);
+        assert_eq!(micros(7, 42_000, true, 84_000, 1000), 7_500);
         // Wraps like the u32 wire field.
         assert_eq!(
             micros(4_294_967, 296_000 / 1000 * 84, false, 84_000, 1000),
