@@ -342,6 +342,26 @@ mod tests {
         }
     }
 
+    /// `div_round`'s contract, each refusal on its own: the divisions of `DiffDrive::new` never
+    /// reach the refusals (the geometry checks come first), so only a direct call shows them.
+    #[test]
+    fn div_round_rounds_half_up_and_refuses_out_of_range() {
+        assert_eq!(div_round(7, 2), Some(4)); // 3.5, a tie: upward
+        assert_eq!(div_round(4, 3), Some(1)); // 1.33
+        assert_eq!(div_round(5, 3), Some(2)); // 1.67
+        assert_eq!(div_round(0, 5), Some(0));
+        let limit = 1_i64 << 61;
+        assert_eq!(div_round(limit - 1, limit - 1), Some(1));
+        assert_eq!(div_round(-1, 2), None);
+        assert_eq!(div_round(limit, 1 << 40), None);
+        assert_eq!(div_round(1, 0), None);
+        assert_eq!(div_round(1, -3), None);
+        assert_eq!(div_round(1, limit), None);
+        // The quotient must fit i32: 2³¹ − 1 does, 2³¹ does not.
+        assert_eq!(div_round(i64::from(i32::MAX), 1), Some(i32::MAX));
+        assert_eq!(div_round(1 << 31, 1), None);
+    }
+
     #[test]
     fn a_fixed_geometry_is_a_constant() {
         const AMR: Result<DiffDrive, KinematicsError> =

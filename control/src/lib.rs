@@ -103,3 +103,46 @@ pub const fn clamp_sym(x: Q, limit: Q) -> Q {
 pub const fn within(x: Q, limit: Q) -> bool {
     x.to_bits() <= limit.to_bits() && x.to_bits() >= limit.saturating_neg().to_bits()
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn q(x: f64) -> Q {
+        Q::from_num(x)
+    }
+
+    #[test]
+    fn q_from_f64_rounds_saturates_and_maps_nan_to_zero() {
+        assert_eq!(q_from_f64(1.5), q(1.5));
+        assert_eq!(q_from_f64(-2.25), q(-2.25));
+        // Q16.16 ends below 32 768: anything beyond saturates to the end on its side.
+        assert_eq!(q_from_f64(1e9), Q::MAX);
+        assert_eq!(q_from_f64(f64::INFINITY), Q::MAX);
+        assert_eq!(q_from_f64(-1e9), Q::MIN);
+        assert_eq!(q_from_f64(f64::NEG_INFINITY), Q::MIN);
+        assert_eq!(q_from_f64(f64::NAN), Q::ZERO);
+    }
+
+    #[test]
+    fn clamp_sym_limits_both_sides_and_treats_a_negative_limit_as_zero() {
+        assert_eq!(clamp_sym(q(2.0), q(3.0)), q(2.0));
+        assert_eq!(clamp_sym(q(4.0), q(3.0)), q(3.0));
+        assert_eq!(clamp_sym(q(-4.0), q(3.0)), q(-3.0));
+        // A limit of −1 is a limit of 0: both signs of input end at zero.
+        assert_eq!(clamp_sym(q(5.0), q(-1.0)), Q::ZERO);
+        assert_eq!(clamp_sym(q(-5.0), q(-1.0)), Q::ZERO);
+        // −Q::MAX is one step above Q::MIN: the symmetric range excludes Q::MIN.
+        assert_eq!(clamp_sym(Q::MIN, Q::MAX), -Q::MAX);
+    }
+
+    #[test]
+    fn within_is_the_closed_symmetric_interval() {
+        assert!(within(q(3.0), q(3.0)));
+        assert!(within(q(-3.0), q(3.0)));
+        assert!(within(Q::ZERO, Q::ZERO));
+        assert!(!within(q(3.5), q(3.0)));
+        assert!(!within(q(-3.5), q(3.0)));
+        assert!(!within(Q::MIN, Q::MAX));
+    }
+}

@@ -361,6 +361,80 @@ mod tests {
     }
 
     #[test]
+    fn is_valid_needs_both_the_limits_and_the_integrator_in_bounds() {
+        let g = gains(1.0, 1.0, 3.0, 1.0, AntiWindup::Conditional);
+        assert!(Pid::from_parts(g, q(1.0), Q::ZERO).is_valid());
+        assert!(Pid::from_parts(g, q(-1.0), Q::ZERO).is_valid());
+        // Integrator beyond ±i_limit with valid limits.
+        assert!(!Pid::from_parts(g, q(1.5), Q::ZERO).is_valid());
+        assert!(!Pid::from_parts(g, q(-1.5), Q::ZERO).is_valid());
+        // A negative limit with the integrator at zero.
+        let bad = gains(1.0, 1.0, -3.0, 1.0, AntiWindup::Conditional);
+        assert!(!bad.is_valid());
+        assert!(!Pid::from_parts(bad, Q::ZERO, Q::ZERO).is_valid());
+    }
+
+    #[test]
+    fn reset_clears_the_integrator_and_restarts_the_derivative() {
+        // I and D only: after one step the integrator holds ki_dt·e = 2.
+        let mut g = gains(0.0, 1.0, 100.0, 100.0, AntiWindup::Conditional);
+        g.kd_dt = q(2.0);
+        let mut pid = Pid::new(g);
+        pid.step(q(2.0), Q::ZERO);
+        assert_eq!(pid.integrator(), q(2.0));
+        pid.reset(q(8.0));
+        assert_eq!(pid.integrator(), Q::ZERO);
+        // The derivative starts from the measurement given to reset: y = 8 again is no change, so
+        // the output is the integrator's one step of ki_dt·(r − y) = 0.
+        assert_eq!(pid.step(q(8.0), q(8.0)), Q::ZERO);
+    }
+
+    /// Conditional integration holds the integrator only while the unclamped output is strictly
+    /// beyond the limit and the error pushes further out: an output exactly at the limit still
+    /// integrates; a saturated output with the error pulling back integrates; each side alike.
+    #[test]
+    fn conditional_integration_at_and_beyond_each_limit() {
+        let g = gains(1.0, 1.0, 3.0, 10.0, AntiWindup::Conditional);
+        // e = ±1.5: p = ±1.5, candidate ±1.5, raw ±3 = ±out_limit, not beyond: integrate.
+        for s in [1.0, -1.0] {
+            let mut pid = Pid::new(g);
+            assert_eq!(pid.step(q(1.5 * s), Q::ZERO), q(3.0 * s));
+            assert_eq!(pid.integrator(), q(1.5 * s));
+        }
+        // kp = 10, e = ±1: raw = ±11, beyond in the error's direction: the integrator holds.
+        let strong = gains(10.0, 1.0, 3.0, 10.0, AntiWindup::Conditional);
+        for s in [1.0, -1.0] {
+            let mut pid = Pid::new(strong);
+            assert_eq!(pid.step(q(s), Q::ZERO), q(3.0 * s));
+            assert_eq!(pid.integrator(), Q::ZERO);
+        }
+        // Unsaturated (raw = ±1): the error's sign alone does not hold the integrator.
+        for s in [1.0, -1.0] {
+            let mut pid = Pid::new(g);
+            assert_eq!(pid.step(q(0.5 * s), Q::ZERO), q(s));
+            assert_eq!(pid.integrator(), q(0.5 * s));
+        }
+    }
+
+    #[test]
+    fn speed_and_current_wrappers_step_and_reset_their_controller() {
+        let g = gains(2.0, 0.5, 10.0, 10.0, AntiWindup::Conditional);
+        let mut speed = SpeedPid::new(g);
+        // p = 2·3 = 6 plus the integrator's 0.5·3 = 1.5, then 6 plus 3.
+        assert_eq!(speed.step(q(3.0), Q::ZERO), q(7.5));
+        assert_eq!(speed.step(q(3.0), Q::ZERO), q(9.0));
+        speed.reset(Q::ZERO);
+        assert_eq!(speed.inner().integrator(), Q::ZERO);
+        let mut current = CurrentPi::new(gains(0.1, 0.05, 1.0, 1.0, AntiWindup::Conditional));
+        // 0.1·2 + 0.05·2 = 0.3, in Q16.16 steps.
+        let d = current.step(q(2.0), Q::ZERO);
+        assert_eq!(d, q(0.1) * q(2.0) + q(0.05) * q(2.0));
+        assert_ne!(current.inner().integrator(), Q::ZERO);
+        current.reset(Q::ZERO);
+        assert_eq!(current.inner().integrator(), Q::ZERO);
+    }
+
+    #[test]
     fn negative_limits_become_zero() {
         let mut pid = Pid::new(gains(1.0, 1.0, -1.0, -1.0, AntiWindup::Conditional));
         assert!(pid.is_valid());

@@ -696,6 +696,21 @@ mod tests {
         }
     }
 
+    /// The state invariant clause by clause: the remainder is below one Q16.16 step (`TICK_HZ`
+    /// sub-steps), and the exact position lies in the travel (on `hi` only with no remainder).
+    #[test]
+    fn is_valid_bounds_the_remainder_and_the_exact_position() {
+        let l = lim(-1.0, 1.0, 0.01);
+        let v = Speed::ZERO;
+        assert!(Trapezoid::from_parts(q(0.5), TICK_HZ - 1, v).is_valid(&l));
+        assert!(!Trapezoid::from_parts(q(0.5), TICK_HZ, v).is_valid(&l));
+        assert!(Trapezoid::from_parts(q(-1.0), 0, v).is_valid(&l));
+        assert!(!Trapezoid::from_parts(q(-1.0) - Q::DELTA, TICK_HZ - 1, v).is_valid(&l));
+        assert!(Trapezoid::from_parts(q(1.0), 0, v).is_valid(&l));
+        assert!(!Trapezoid::from_parts(q(1.0), 1, v).is_valid(&l));
+        assert!(!Trapezoid::from_parts(q(0.5), 0, v).is_valid(&lim(-1.0, 1.0, 0.0)));
+    }
+
     #[test]
     fn extremes_do_not_overflow() {
         let l = ProfileLimits {

@@ -89,6 +89,16 @@ mod tests {
     }
 
     #[test]
+    fn reset_jumps_and_the_ramp_continues_from_there() {
+        let mut r = RateLimiter::new(Q::from_num(0.25), Q::ZERO);
+        r.reset(Q::from_num(2));
+        assert_eq!(r.value(), Q::from_num(2));
+        // One step from 2 toward 0, not from 0.
+        assert_eq!(r.step(Q::ZERO), Q::from_num(1.75));
+        assert_eq!(r.max_step(), Q::from_num(0.25));
+    }
+
+    #[test]
     fn negative_step_freezes() {
         let mut r = RateLimiter::new(Q::from_num(-1), Q::from_num(3));
         assert_eq!(r.step(Q::ZERO), Q::from_num(3));

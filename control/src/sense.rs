@@ -155,6 +155,14 @@ mod tests {
     }
 
     #[test]
+    fn speed_scale_refuses_a_zero_argument() {
+        // Zero counts per revolution divides by zero; a zero rate has no sample period.
+        assert_eq!(speed_scale(0, 10_000), None);
+        assert_eq!(speed_scale(4096, 0), None);
+        assert_eq!(speed_scale(0, 0), None);
+    }
+
+    #[test]
     fn plausibility() {
         assert!(speed_plausible(q(40.0), q(20.0)));
         assert!(!speed_plausible(q(-40.1), q(20.0)));

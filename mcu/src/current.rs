@@ -182,9 +182,11 @@ mod tests {
         );
         // A mean, rounded: half the readings 2050, half 2051 → 2050.5 → 2051.
         let mut c = Calibration::new();
+        assert_eq!(c.count(), 0);
         for k in 0..64 {
             c.add([2050 + (k % 2), 2048]);
         }
+        assert_eq!(c.count(), 64);
         assert_eq!(c.offsets(&AMR), Ok([2051, 2048]));
     }
 

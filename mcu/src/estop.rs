@@ -66,3 +66,30 @@ impl EstopInput {
         self.pressed_since_poll
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::hw::RecordingBridge;
+
+    #[test]
+    fn a_press_brakes_at_once_and_each_change_is_reported_once() {
+        let mut e = EstopInput::new();
+        let mut b = RecordingBridge::new(4200);
+        b.apply(BridgeState::Run);
+        assert!(e.edge(&mut b, true));
+        assert_eq!(b.state, BridgeState::Brake);
+        assert!(e.press_pending());
+        // Released again before the tick: the press is still reported, then cleared.
+        assert!(!e.edge(&mut b, false));
+        assert_eq!(e.poll(false), Some(Estop::Engage));
+        assert!(!e.press_pending());
+        // No press since the last poll and the input released: the release, once.
+        assert_eq!(e.poll(false), Some(Estop::Release));
+        assert_eq!(e.poll(false), None);
+        // Held across polls: one engage, then nothing until it is let go.
+        assert_eq!(e.poll(true), Some(Estop::Engage));
+        assert_eq!(e.poll(true), None);
+        assert_eq!(e.poll(false), Some(Estop::Release));
+    }
+}

@@ -74,3 +74,31 @@ impl Bridge for RecordingBridge {
         self.tripped = false;
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The simulator's bridge: the current loop scales its duty by `pwm_arr`, and compares
+    /// written while braked are not kept.
+    #[test]
+    fn recording_bridge_reports_its_reload_and_keeps_compares_only_while_running() {
+        let mut b = RecordingBridge::new(4200);
+        assert_eq!(b.pwm_arr(), 4200);
+        let c = [
+            BridgeCompare { a: 2100, b: 0 },
+            BridgeCompare { a: 0, b: 7 },
+        ];
+        b.set(c);
+        assert_eq!(b.compares, [BridgeCompare::default(); 2]);
+        b.apply(BridgeState::Run);
+        b.set(c);
+        assert_eq!(b.compares, c);
+        b.apply(BridgeState::Brake);
+        assert_eq!(b.compares, [BridgeCompare::default(); 2]);
+        b.tripped = true;
+        assert!(b.break_tripped());
+        b.clear_break();
+        assert!(!b.break_tripped());
+    }
+}

@@ -120,12 +120,16 @@ mod tests {
     #[test]
     fn a_frame_is_queued_whole_or_dropped_and_counted() {
         let mut q = TxQueue::<8>::new();
+        assert_eq!(q.dropped(), 0);
         assert!(q.push_frame(&[1, 2, 3, 4, 5]));
+        assert!(!q.is_empty());
         assert!(
             !q.push_frame(&[6, 7, 8, 9]),
             "4 bytes do not fit in the 3 left"
         );
         assert_eq!(q.dropped(), 1);
+        assert!(!q.push_frame(&[6, 7, 8, 9]));
+        assert_eq!(q.dropped(), 2);
         assert!(q.push_frame(&[6, 7, 8]));
         let (a, b) = (q.pop(), q.pop());
         assert!(
@@ -136,6 +140,20 @@ mod tests {
         let out: std::vec::Vec<u8> = core::iter::from_fn(|| q.pop()).collect();
         assert_eq!(out, [1, 2, 3, 4, 5, 6, 7, 8]);
         assert!(q.is_empty());
+    }
+
+    #[test]
+    fn bytes_are_put_back_only_if_they_all_fit() {
+        let mut q = TxQueue::<4>::new();
+        assert!(q.push_frame(&[3, 4]));
+        // Room for 2: one byte back leaves room to spare, then two more do not fit.
+        assert!(q.push_front_all(&[2]));
+        assert!(!q.push_front_all(&[0, 1]));
+        assert_eq!(q.len(), 3);
+        assert!(q.push_front_all(&[1]));
+        assert!(!q.push_front_all(&[0]), "full");
+        let out: std::vec::Vec<u8> = core::iter::from_fn(|| q.pop()).collect();
+        assert_eq!(out, [1, 2, 3, 4]);
     }
 
     #[test]

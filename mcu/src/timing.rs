@@ -132,6 +132,10 @@ mod tests {
         assert_eq!(timer_divider(16_000_000, 1_000), Some((0, 15_999)));
         assert_eq!(timer_divider(84_000_000, 9), None);
         assert_eq!(timer_divider(84_000_000, 0), None);
+        // 1 000 001 Hz / 1 kHz = 1000.001: inexact, refused (not rounded to 1000).
+        assert_eq!(timer_divider(1_000_001, 1_000), None);
+        // A rate above the clock.
+        assert_eq!(timer_divider(1_000, 2_000), None);
         // 168 MHz centre-aligned at 20 kHz: 168e6 / 40e3 = 4200.
         assert_eq!(center_aligned_arr(168_000_000, 20_000), Some(4200));
         assert_eq!(center_aligned_arr(168_000_000, 1), None);
@@ -147,6 +151,9 @@ mod tests {
         assert_eq!(iwdg_timeout_us(0, 399, 17_000), 94_117);
         // 1 s needs /8: 32000·1/8 = 4000 → reload 3999.
         assert_eq!(iwdg_setting(1000, 32_000), Some((1, 3999)));
+        // And back: /8 · 4000 counts at 32 kHz is 1 s; /256 · 4096 is 32.768 s.
+        assert_eq!(iwdg_timeout_us(1, 3999, 32_000), 1_000_000);
+        assert_eq!(iwdg_timeout_us(6, 4095, 32_000), 32_768_000);
     }
 
     #[test]
@@ -159,6 +166,9 @@ mod tests {
         assert_eq!(micros(7, 84, true, 84_000, 1000), 8_001);
         // Flag set after a late count read: the count still belongs to tick 7.
         assert_eq!(micros(7, 83_990, true, 84_000, 1000), 7_999);
+        // Only a count below half a period is taken as after the wrap; half a period is before it.
+        assert_eq!(micros(7, 41_999, true, 84_000, 1000), 8_499);
+        assert_eq!(micros(7, 42_000, true, 84_000, 1000), 7_500);
         // Wraps like the u32 wire field.
         assert_eq!(
             micros(4_294_967, 296_000 / 1000 * 84, false, 84_000, 1000),

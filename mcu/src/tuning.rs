@@ -171,6 +171,15 @@ mod tests {
     }
 
     #[test]
+    fn rates_by_hand() {
+        // TIM1/TIM8 at 168 MHz, centre-aligned 20 kHz: 168e6 / (2 · 20e3) = 4200 counts.
+        assert_eq!(AMR.pwm_arr(), Some(4200));
+        // 20 kHz current loop, 10 kHz speed loop, 1 kHz tick.
+        assert_eq!(AMR.current_samples_per_speed(), 2);
+        assert_eq!(AMR.us_per_tick(), 1000);
+    }
+
+    #[test]
     fn gains_are_valid() {
         assert!(AMR.speed.is_valid() && AMR.current.is_valid());
         assert!(AMR.current.out_limit <= Q::ONE);

@@ -209,6 +209,34 @@ fn feedback_reports_signed_currents() {
 }
 
 #[test]
+fn feedback_reports_wheel_speeds_and_encoder_counts() {
+    let mut b = Board::new();
+    // Left +2 counts per speed sample, right −1, for 40 samples (more than the 16-sample window).
+    let (mut l, mut r) = (0u16, 0u16);
+    for _ in 0..40 {
+        l = l.wrapping_add(2);
+        r = r.wrapping_sub(1);
+        let s = b.speed.run([l, r], None);
+        b.meas.record_speed(&s);
+    }
+    b.frame(0.0, 0.0, false, 0);
+    let fb = decode_feedback(&b.tx).unwrap();
+    // 2 counts per 0.1 ms = 20 000 counts/s = 20 000 / 4096 rev/s = 30.68 rad/s; −1: −15.34.
+    let per_count = AMR.speed_hz as f32 / AMR.counts_per_rev as f32 * core::f32::consts::TAU;
+    assert!(
+        (fb.left_speed - 2.0 * per_count).abs() < 0.01,
+        "{}",
+        fb.left_speed
+    );
+    assert!(
+        (fb.right_speed + per_count).abs() < 0.01,
+        "{}",
+        fb.right_speed
+    );
+    assert_eq!((fb.left_encoder, fb.right_encoder), (80, -40));
+}
+
+#[test]
 fn overcurrent_brakes_the_bridge_in_the_same_run_and_latches_at_the_tick() {
     let mut b = Board::new();
     b.drive_at(2.0);
@@ -370,4 +398,86 @@ fn a_cut_transaction_is_a_framing_refusal_that_moves_nothing() {
     assert_eq!(after.applied(), before.applied());
     assert_eq!(after.last_valid(), before.last_valid());
     assert_eq!(after.age(), before.age());
+}
+
+#[test]
+fn feedback_echoes_the_sequence_number_of_the_last_accepted_command_only() {
+    let mut b = Board::new();
+    b.frame(0.0, 0.0, false, 0);
+    b.frame(0.0, 0.0, false, 0);
+    assert_eq!(decode_feedback(&b.tx).unwrap().cmd_seq, 2);
+    // A frame with its CRC broken is refused: the echo stays at the last accepted command.
+    let mut f = [0u8; FRAME_LEN];
+    encode_command(
+        &MotorCommand {
+            timestamp_us: 0,
+            left_speed_cmd: 0.0,
+            right_speed_cmd: 0.0,
+            control_mode: 1,
+            enable: false,
+            seq: 99,
+            request: 0,
+        },
+        &mut f,
+    );
+    f[FRAME_LEN - 1] ^= 1;
+    b.link.on_frame(&mut b.safety, &f, &b.meas, 0, &mut b.tx);
+    assert_eq!(b.safety.ladder().counters().valid_frames, 2);
+    assert_eq!(decode_feedback(&b.tx).unwrap().cmd_seq, 2);
+}
+
+#[test]
+fn the_trace_records_one_rearm_per_arming_not_one_per_step() {
+    let mut b = Board::new();
+    // 2000 ticks and frames of driving after a single arming.
+    b.drive_at(1.0);
+    use mcu::trace::Record;
+    let records: Vec<Record> = b.safety.trace().iter().map(|e| e.record).collect();
+    let rearms = records.iter().filter(|r| **r == Record::Rearmed).count();
+    assert_eq!(rearms, 1, "{records:?}");
+    // Nothing else changed while driving: every record is from the arming.
+    assert_eq!(
+        b.safety.trace().total() as usize,
+        records.len(),
+        "{records:?}"
+    );
+}
+
+#[test]
+fn the_tick_clears_the_break_flag_only_while_braked() {
+    let mut b = Board::new();
+    b.drive_at(1.0);
+    assert_eq!(b.bridge.state, BridgeState::Run);
+    // While running the flag stays for the current loop to see and brake on.
+    b.bridge.tripped = true;
+    b.frame(1.0, 1.0, true, 0);
+    b.tick();
+    assert!(b.bridge.tripped);
+    // Braked (power-on BRAKE of a fresh board): the tick clears it; the comparator would set it
+    // again if the overcurrent were still there.
+    let mut b = Board::new();
+    b.bridge.tripped = true;
+    b.tick();
+    assert_eq!(b.bridge.state, BridgeState::Brake);
+    assert!(!b.bridge.tripped);
+}
+
+#[test]
+fn loops_that_reach_exactly_their_minimum_runs_keep_the_watchdog_fed() {
+    let mut b = Board::new();
+    let [min_current, min_speed] = AMR.min_runs_per_tick;
+    let mut inputs = TickInputs {
+        runs: mcu::Runs {
+            current: min_current,
+            speed: min_speed,
+        },
+        ..TickInputs::default()
+    };
+    assert!(b.tick.run(&mut b.safety, &inputs).feed_watchdog);
+    // One run short on the current loop only.
+    inputs.runs = mcu::Runs {
+        current: 2 * min_current - 1,
+        speed: 2 * min_speed,
+    };
+    assert!(!b.tick.run(&mut b.safety, &inputs).feed_watchdog);
 }

@@ -162,11 +162,22 @@ fn estop_latches_and_only_its_release_then_an_enable_rearm() {
     send(&mut l, &mut s, &pwm([300; 4], 200));
     crate::serial::tick(&mut s, &Default::default());
     replies(&mut l);
-    send(&mut l, &mut s, &Message::Estop(Estop::Engage));
+    let driving = send(&mut l, &mut s, &pwm([300; 4], 200)).unwrap();
+    assert_eq!(
+        outputs_after_frame(&driving, 1000),
+        None,
+        "a frame that does not brake leaves the outputs to the tick"
+    );
+    let braked = send(&mut l, &mut s, &Message::Estop(Estop::Engage)).unwrap();
     assert_eq!(
         s.mode(),
         Mode::Brake,
         "ESTOP brakes in the step that received it"
+    );
+    assert_eq!(
+        outputs_after_frame(&braked, 1000),
+        Some([MotorOutput::short(1000); MOTORS]),
+        "and the motors are shorted in the same step"
     );
     assert_eq!(replies(&mut l), [ack(MsgId::Estop, ACK_OK)]);
     // Enable while the ESTOP is engaged: refused.
@@ -206,7 +217,9 @@ fn estop_latches_and_only_its_release_then_an_enable_rearm() {
 #[test]
 fn motor_enable_0_holds_the_motors_off_under_the_stream_until_motor_enable_1() {
     let (mut l, mut s) = board();
+    assert!(!l.motors_enabled(), "power-on: not enabled");
     send(&mut l, &mut s, &Message::MotorEnable(true));
+    assert!(l.motors_enabled());
     let run = |s: &mut Safety<MOTORS>, l: &mut CdcLinkTask, ticks: u32| {
         let mut outs = Vec::new();
         for _ in 0..ticks {
@@ -222,9 +235,18 @@ fn motor_enable_0_holds_the_motors_off_under_the_stream_until_motor_enable_1() {
     let driving = run(&mut s, &mut l, 300);
     assert!(motor_outputs(&driving[299].drive, 1000)[0].ccr > 0);
     replies(&mut l);
+    l.send_status(&s, &ST);
+    let [Message::Status(st)] = replies(&mut l)[..] else {
+        std::panic!("one STATUS");
+    };
+    assert!(
+        st.flags.has(StatusFlags::MOTOR_ENABLED),
+        "enabled and driving"
+    );
 
     send(&mut l, &mut s, &Message::MotorEnable(false));
     assert_eq!(replies(&mut l), [ack(MsgId::MotorEnable, ACK_OK)]);
+    assert!(!l.motors_enabled());
     for (i, out) in run(&mut s, &mut l, 500).iter().enumerate() {
         assert_eq!(out.mode, Mode::Stop, "tick {i} after MOTOR_ENABLE 0");
         assert_eq!(
@@ -448,4 +470,38 @@ fn disabled_frames_keep_the_link_alive_with_every_motor_at_zero() {
         out = crate::serial::tick(&mut s, &Default::default());
     }
     assert_ne!(motor_outputs(&out.drive, 1000)[0], MotorOutput::COAST);
+}
+
+#[test]
+fn a_disabled_frame_still_carries_its_timeout_to_the_ladder() {
+    let (mut l, mut s) = board();
+    send(&mut l, &mut s, &Message::MotorEnable(true));
+    send(&mut l, &mut s, &pwm([300; 4], 100));
+    crate::serial::tick(&mut s, &Default::default());
+    send(&mut l, &mut s, &Message::MotorEnable(false));
+    send(&mut l, &mut s, &pwm([300; 4], 100));
+    let last_frame_tick = s.ticks();
+    let mut braked_at = None;
+    for _ in 0..300 {
+        let out = crate::serial::tick(&mut s, &Default::default());
+        if out.mode == Mode::Brake && braked_at.is_none() {
+            braked_at = Some(s.ticks());
+        }
+    }
+    // The frame's 100 ms, not the profile's 249-tick maximum.
+    let after = braked_at.expect("BRAKE after the timeout") - last_frame_tick;
+    assert!(after < 100, "BRAKE {after} ticks after the last frame");
+}
+
+#[test]
+fn send_imu_queues_one_imu_frame() {
+    let (mut l, _) = board();
+    let imu = Imu {
+        t_ms: 5,
+        accel_mg: [1, -2, 1000],
+        gyro_mdps: [3, 0, -4],
+        temp_cdeg: 2500,
+    };
+    l.send_imu(&imu);
+    assert_eq!(replies(&mut l), [Message::Imu(imu)]);
 }

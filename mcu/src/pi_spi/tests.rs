@@ -234,6 +234,14 @@ fn gains_are_converted_per_sample_and_refused_outside_their_bounds() {
     assert!((g[0].ki_dt.to_num::<f64>() - 0.1).abs() < 2e-5);
     assert!((g[0].kd_dt.to_num::<f64>() - 10.0).abs() < 2e-5);
     assert_eq!(g[0].out_limit, DUTY_LIMIT);
+    // Each maximum is allowed: the bounds are the largest gains, not the first refused ones.
+    let at_max = s(
+        SPEED_BOUNDS.kp_max,
+        SPEED_BOUNDS.ki_max,
+        SPEED_BOUNDS.kd_max,
+    );
+    let g = gains_from_wire(&at_max, &SPEED_BOUNDS).unwrap();
+    assert_eq!(g[0].kp, Q::from_num(SPEED_BOUNDS.kp_max));
     for (set, e) in [
         (s(f32::NAN, 1.0, 0.0), GainError::NonFinite),
         (s(1.0, f32::INFINITY, 0.0), GainError::NonFinite),
@@ -469,6 +477,8 @@ fn mav_holds_the_commanded_speed() {
         "bemf {}",
         fb.motor.bemf[0]
     );
+    // 3000 closed-loop ticks later every controller still satisfies its invariant.
+    assert!(b.app.loops().iter().all(MotorLoop::is_valid));
 }
 
 #[test]
@@ -483,9 +493,19 @@ fn mtp_reaches_its_goal_under_the_cap_and_reports_done() {
     };
     b.arm(&rx);
     let mut fastest = 0.0f64;
-    for _ in 0..600 {
+    for k in 0..600 {
         let s = stream(&mut b, &rx, 10);
         fastest = fastest.max(s[0].abs());
+        if k == 100 {
+            // 1 s into the 4 s move of motors 0 and 1: not done yet.
+            let fb = b.transfer_bytes(&bytes(&rx)).1;
+            assert_eq!(
+                fb.motor.done & 0b0011,
+                0,
+                "done early: {:#06b}",
+                fb.motor.done
+            );
+        }
     }
     assert!(
         fastest <= std::f64::consts::PI * 1.1,
@@ -555,6 +575,13 @@ fn odometry_is_zero_until_configured_then_follows_the_wheels_and_resets() {
         fb.odometry.pos_x
     );
     assert!(fb.odometry.pos_y.abs() < 1e-6 && fb.odometry.heading.abs() < 1e-6);
+    // 720 counts/s is π rad/s per wheel: vx = 0.0125 m · 4π rad/s = 0.157 m/s, over the
+    // odometry's own 10 ms period.
+    assert!(
+        (f64::from(fb.odometry.vx) - 0.05 * std::f64::consts::PI).abs() < 0.02,
+        "vx {}",
+        fb.odometry.vx
+    );
     let reset = RxBuffer {
         updates: UpdateFlags(UpdateFlags::ODOM_RESET),
         ..mav
@@ -578,4 +605,148 @@ fn odometry_is_zero_until_configured_then_follows_the_wheels_and_resets() {
     };
     assert!(b.transfer(&bad).accepted);
     assert_eq!(b.app.updates().kinematics_refused, 1);
+}
+
+#[test]
+fn counts_become_radians_and_saturate_at_the_format_range() {
+    // One revolution is 2π rad, to within a Q16.16 step.
+    let rev = rad_of_counts(COUNTS_PER_REV as i32).to_num::<f64>();
+    assert!(
+        (rev - core::f64::consts::TAU).abs() < 2.0 / 65536.0,
+        "{rev}"
+    );
+    assert_eq!(rad_of_counts(0), Position::ZERO);
+    // 2³¹ counts are about 1.5 million revolutions, far beyond Q16.16's ±32 768 rad.
+    assert_eq!(rad_of_counts(i32::MAX), Position::MAX);
+    assert_eq!(rad_of_counts(i32::MIN), Position::MIN);
+}
+
+/// An MTP axis far behind its profile: the position controller's correction (here its full
+/// 5 rad/s) is added to the profile's speed, and the sum is held to the ladder's cap before the
+/// speed controller sees it, in either direction.
+#[test]
+fn the_position_correction_never_lifts_the_speed_setpoint_above_the_cap() {
+    let travel = Travel {
+        lo: Position::from_num(-10),
+        hi: Position::from_num(10),
+    };
+    let lim = ProfileLimits {
+        travel,
+        accel_step: Speed::from_num(0.01),
+    };
+    let cap = Speed::from_num(1);
+    for sign in [1, -1] {
+        let goal = Position::from_num(sign);
+        let mut l = MotorLoop::new(&TUNING, &travel);
+        // Already closed, the profile resting on the goal, the motor 1 rad short of it.
+        l.closed = true;
+        l.profile = Trapezoid::new(goal, &travel);
+        let duty = l.run(
+            &AxisDrive::Position { target: goal, cap },
+            Speed::ZERO,
+            Position::ZERO,
+            &lim,
+        );
+        let mut speed_pid = Pid::new(TUNING.speed);
+        let want = speed_pid.step(cap * sign, Speed::ZERO);
+        assert_eq!(duty, Some(want), "goal {goal}");
+    }
+}
+
+#[test]
+fn done_needs_the_loop_closed_the_profile_on_the_goal_and_the_motor_within_tolerance() {
+    let travel = Travel {
+        lo: Position::from_num(-10),
+        hi: Position::from_num(10),
+    };
+    let lim = ProfileLimits {
+        travel,
+        accel_step: Speed::from_num(0.01),
+    };
+    let goal = Position::from_num(1);
+    let tol = rad_of_counts(DONE_TOLERANCE_COUNTS);
+    let mut l = MotorLoop::new(&TUNING, &travel);
+    l.profile = Trapezoid::new(goal, &travel);
+    assert!(!l.done(goal, goal, &lim), "open loop");
+    l.closed = true;
+    assert!(l.done(goal, goal, &lim));
+    assert!(l.done(goal, goal + tol, &lim));
+    assert!(
+        !l.done(goal, goal + tol + tol, &lim),
+        "motor short of the goal"
+    );
+    l.profile = Trapezoid::new(Position::ZERO, &travel);
+    assert!(!l.done(goal, goal, &lim), "profile not on the goal");
+}
+
+#[test]
+fn a_pending_estop_press_shorts_the_motors_in_the_tick_before_the_ladder_knows() {
+    let mut b = Board::new();
+    b.arm(&pwm([200; 4]));
+    let o = b.tick();
+    assert_ne!(o.motors, [MotorOutput::short(FULL); MOTORS], "driving");
+    // The edge handler ran; the tick has not polled the input, so the ladder still runs.
+    b.estop.edge_then(true, || {});
+    let o = b.tick();
+    assert_ne!(o.out.drive, Drive::Brake);
+    assert_eq!(o.motors, [MotorOutput::short(FULL); MOTORS]);
+}
+
+#[test]
+fn shutdown_of_reads_the_motor_and_servo_bits_of_any_buffer() {
+    for (servos, motors) in [(false, true), (true, false), (true, true), (false, false)] {
+        let sd = Shutdown { servos, motors };
+        let raw = bytes(&RxBuffer {
+            system_shutdown: sd,
+            ..pwm([200; 4])
+        });
+        assert_eq!(shutdown_of(&raw), sd);
+    }
+}
+
+#[test]
+fn an_imu_reading_reaches_the_next_feedback() {
+    let mut b = Board::new();
+    // Level and still, raw temperature 0: 36.53 °C by the MPU6050 register map's raw / 340 + 36.53.
+    b.app.imu_sample(Some(([0, 0, 16_384], [0; 3], 0)));
+    let fb = b.transfer_bytes(&bytes(&RxBuffer::default())).1;
+    assert!(
+        (fb.imu.temperature - 36.53).abs() < 1e-4,
+        "{}",
+        fb.imu.temperature
+    );
+}
+
+#[test]
+fn orientation_and_imu_calibration_updates_count_only_under_their_flags() {
+    let mut b = Board::new();
+    // The default buffer's orientation matrices are all zeros: not rotations.
+    assert!(b.transfer(&RxBuffer::default()).accepted);
+    assert_eq!(b.app.updates().orientation_refused, 0, "no flag, no update");
+    assert_eq!(b.app.updates().save_imu_cal, 0);
+    let bad = RxBuffer {
+        updates: UpdateFlags(UpdateFlags::IMU_ORIENTATION),
+        ..RxBuffer::default()
+    };
+    assert!(b.transfer(&bad).accepted);
+    assert_eq!(b.app.updates().orientation_refused, 1);
+    let identity = [1, 0, 0, 0, 1, 0, 0, 0, 1];
+    let good = RxBuffer {
+        imu_gyro_orientation: identity,
+        imu_compass_orientation: identity,
+        ..bad
+    };
+    assert!(b.transfer(&good).accepted);
+    assert_eq!(
+        b.app.updates().orientation_refused,
+        1,
+        "a rotation is taken"
+    );
+    let save = RxBuffer {
+        updates: UpdateFlags(UpdateFlags::SAVE_IMU_CAL),
+        ..RxBuffer::default()
+    };
+    assert!(b.transfer(&save).accepted);
+    assert!(b.transfer(&RxBuffer::default()).accepted);
+    assert_eq!(b.app.updates().save_imu_cal, 1);
 }

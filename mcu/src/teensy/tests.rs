@@ -200,6 +200,14 @@ fn config_sets_the_acceleration_within_the_profile() {
         None,
         "52 rad/s² is above the profile's 50"
     );
+    // The joints take a new acceleration; a zero or negative one is ignored.
+    let mut j = Joints::new([Position::ZERO; JOINTS], &cfg);
+    assert_eq!(j.accel(), cfg.params().max_cmd_step);
+    j.set_accel(a);
+    assert_eq!(j.accel(), a);
+    j.set_accel(Speed::ZERO);
+    j.set_accel(-a);
+    assert_eq!(j.accel(), a);
 }
 
 #[test]
@@ -248,8 +256,10 @@ fn brake_halts_the_motors_and_the_profiles_restart_from_them() {
             g.run();
         }
     }
-    // Moving: the next tick's target is ahead of the motors.
-    drive_joints(&mut j, &mut g, &run, false);
+    // Moving: the next tick's target is ahead of the motors, and it is the references in steps.
+    let t = drive_joints(&mut j, &mut g, &run, false);
+    assert_eq!(t, j.positions().map(steps_of));
+    assert!(t.iter().all(|&s| s > 0), "moving toward +3 rad: {t:?}");
     let at = g.position();
     let t = drive_joints(&mut j, &mut g, &Drive::Brake, false);
     assert_eq!(t, at, "halted where the motors stand");

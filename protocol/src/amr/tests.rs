@@ -110,6 +110,21 @@ fn framing_errors() {
     let crc = crc16::checksum(&f[..62]);
     f[62..].copy_from_slice(&crc.to_be_bytes());
     assert_eq!(decode_command(&f), Err(RejectReason::Framing));
+    // Two equal non-zero padding bytes, whose XOR would be zero: the padding after the 2-byte
+    // payload is bytes 3..62, fourteen 4-byte words and a 3-byte tail. One pair in the same lane
+    // of two words, one pair in the tail.
+    for (a, b) in [(3, 7), (60, 61)] {
+        let mut f = frame_with(&V1);
+        f[a] = 0x5A;
+        f[b] = 0x5A;
+        let crc = crc16::checksum(&f[..62]);
+        f[62..].copy_from_slice(&crc.to_be_bytes());
+        assert_eq!(
+            decode_command(&f),
+            Err(RejectReason::Framing),
+            "padding bytes {a} and {b}"
+        );
+    }
 }
 
 #[test]
@@ -487,4 +502,25 @@ fn padding_check_covers_exactly_the_bytes_between_payload_and_crc() {
     f[0] = 0;
     assert!(padding_is_zero(&f, CRC_OFFSET));
     assert!(padding_is_zero(&f, usize::MAX));
+}
+
+#[test]
+fn with_output_fills_mode_and_fault_flags_and_keeps_the_rest() {
+    let out = statemachine::Output::<2> {
+        mode: statemachine::Mode::Stop,
+        drive: statemachine::Drive::Brake,
+        limit: statemachine::Speed::ZERO,
+        faults: statemachine::FaultFlags::COMM_LOST.union(statemachine::FaultFlags::ESTOP),
+        age: 7,
+    };
+    let fb = MotorFeedback {
+        seq: 41,
+        left_encoder: -3,
+        ..MotorFeedback::default()
+    }
+    .with_output(&out);
+    // STOP is rung 3 on the wire; COMM_LOST is bit 4 and ESTOP bit 5: 0x30.
+    assert_eq!(fb.mode, 3);
+    assert_eq!(fb.fault_flags, 0x30);
+    assert_eq!((fb.seq, fb.left_encoder), (41, -3));
 }
