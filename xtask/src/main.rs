@@ -176,21 +176,8 @@ fn kani_write(root: &Path, dirs: &[&str]) -> Result<(), String> {
         }
         body.push_str(&kani_table(dir)?);
     }
-    let a = doc
-        .find(KANI_BEGIN)
-        .ok_or("proofs/REPORT.md: no `<!-- kani:begin` marker")?
-        .saturating_add(KANI_BEGIN.len());
-    let b = doc
-        .get(a..)
-        .and_then(|s| s.find(KANI_END))
-        .ok_or("proofs/REPORT.md: no `<!-- kani:end -->` marker")?
-        .saturating_add(a);
-    let new = format!(
-        "{}\n{}\n{}",
-        doc.get(..a).unwrap_or(""),
-        body.trim(),
-        doc.get(b..).unwrap_or("")
-    );
+    let new = rta::replace_between(&doc, KANI_BEGIN, KANI_END, &format!("{}\n", body.trim()))
+        .map_err(|e| format!("proofs/REPORT.md: {e}"))?;
     std::fs::write(&path, new).map_err(|e| format!("{}: {e}", path.display()))
 }
 
@@ -411,8 +398,43 @@ fn main() -> ExitCode {
 }
 
 #[cfg(test)]
+#[allow(clippy::unwrap_used)]
 mod tests {
     use super::*;
+
+    /// A result directory of `files` (name, contents) under the system's temporary directory.
+    fn results(tag: &str, files: &[(&str, &str)]) -> std::path::PathBuf {
+        let dir = std::env::temp_dir().join(format!("xtask-kani-{tag}-{}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&dir);
+        std::fs::create_dir_all(&dir).unwrap();
+        for (name, text) in files {
+            std::fs::write(dir.join(name), text).unwrap();
+        }
+        dir
+    }
+
+    #[test]
+    fn two_harnesses_of_one_name_are_refused_and_the_wall_time_is_read() {
+        let ok = "VERIFICATION:- SUCCESSFUL\nVerification Time: 1.5s\n";
+        let dup = results(
+            "dup",
+            &[("a::proofs::verify_x", ok), ("b::proofs::verify_x", ok)],
+        );
+        let e = kani_table(&dup).unwrap_err();
+        assert!(e.contains("two harnesses named `verify_x`"), "{e}");
+        let one = results("one", &[("a::proofs::verify_x", ok)]);
+        std::fs::write(
+            one.with_file_name(format!("xtask-kani-one-{}.seconds", std::process::id())),
+            "754\n",
+        )
+        .unwrap();
+        let t = kani_table(&one).unwrap();
+        assert!(
+            t.starts_with("Wall-clock time of this `cargo kani` step: 12 min 34 s."),
+            "{t}"
+        );
+        assert!(t.contains("| `verify_x` | VERIFIED |"), "{t}");
+    }
 
     #[test]
     fn reads_a_kani_summary() {

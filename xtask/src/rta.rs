@@ -937,14 +937,19 @@ pub fn section(doc: &str) -> Option<&str> {
 
 /// The document with its generated section replaced by `body`.
 pub fn replace_section(doc: &str, body: &str) -> Result<String, String> {
+    replace_between(doc, BEGIN, END, body)
+}
+
+/// `doc` with what stands between the markers `begin` and `end` replaced by a newline and `body`.
+pub fn replace_between(doc: &str, begin: &str, end: &str, body: &str) -> Result<String, String> {
     let a = doc
-        .find(BEGIN)
-        .ok_or("no `<!-- rta:begin` marker")?
-        .saturating_add(BEGIN.len());
+        .find(begin)
+        .ok_or_else(|| format!("no `{begin}` marker"))?
+        .saturating_add(begin.len());
     let b = doc
         .get(a..)
-        .and_then(|s| s.find(END))
-        .ok_or("no `<!-- rta:end -->` marker")?
+        .and_then(|s| s.find(end))
+        .ok_or_else(|| format!("no `{end}` marker"))?
         .saturating_add(a);
     Ok(format!(
         "{}\n{}{}",
