@@ -133,6 +133,25 @@ pub fn micros_bounded(src: &mut impl Source) {
     cover!(src, off >= 1000, "update pending counted");
 }
 
+/// P-17's three properties after the ESTOP frame: the ladder latched in BRAKE, the link holding
+/// the ESTOP it engaged, and one more reply queued than `queued` (the ACK).
+fn estop_latched_and_acknowledged(
+    safety: &crate::Safety<{ crate::cdc::MOTORS }>,
+    link: &crate::cdc::CdcLinkTask,
+    queued: usize,
+) {
+    use statemachine::{check, Mode, Source as Origin};
+    check!(
+        safety.mode() == Mode::Brake,
+        "P-17: the ladder is latched in BRAKE after the ESTOP frame"
+    );
+    check!(
+        safety.ladder().estop_owners() & Origin::Primary.bit() != 0,
+        "P-17: the link holds the ESTOP it engaged"
+    );
+    check!(link.tx.len() > queued, "P-17: the ESTOP is acknowledged");
+}
+
 /// P-17: Seed 001 board, the link body's half: from any ladder state, the decoded `ESTOP 1` that
 /// the stream decoder delivers at the frame's last byte latches BRAKE (mode and drive) in that
 /// same call, leaves the link holding the ESTOP, and queues its ACK. That the decoder delivers the
@@ -141,7 +160,7 @@ pub fn micros_bounded(src: &mut impl Source) {
 pub fn serial_estop_message_brakes(src: &mut impl Source) {
     use crate::cdc::{BoardStatus, CdcLinkTask, MOTORS};
     use protocol::cdc::Message;
-    use statemachine::{check, Config, Drive, Estop, Mode, Source as Origin};
+    use statemachine::{check, Config, Drive, Estop, Mode};
     let ladder = statemachine::harness::arbitrary::ladder::<MOTORS>(src, Config::CDC);
     let mut safety = crate::Safety::from_ladder(ladder);
     let mut link = CdcLinkTask::new();
@@ -153,15 +172,7 @@ pub fn serial_estop_message_brakes(src: &mut impl Source) {
         matches!(out, Some(o) if o.mode == Mode::Brake && o.drive == Drive::Brake),
         "P-17: a decoded ESTOP frame brakes in the call that applies it"
     );
-    check!(
-        safety.mode() == Mode::Brake,
-        "P-17: the ladder is latched in BRAKE after the ESTOP frame"
-    );
-    check!(
-        safety.ladder().estop_owners() & Origin::Primary.bit() != 0,
-        "P-17: the link holds the ESTOP it engaged"
-    );
-    check!(link.tx.len() > queued, "P-17: the ESTOP is acknowledged");
+    estop_latched_and_acknowledged(&safety, &link, queued);
     cover!(src, was_running, "ESTOP while running");
     cover!(src, !was_running, "ESTOP while already braked");
 }
@@ -173,7 +184,7 @@ pub fn serial_estop_message_brakes(src: &mut impl Source) {
 pub fn serial_estop_brakes_at_its_last_byte(src: &mut impl Source) {
     use crate::cdc::{BoardStatus, CdcLinkTask, MOTORS};
     use protocol::cdc::{Message, MAX_FRAME_LEN};
-    use statemachine::{check, Config, Estop, Mode, Source as Origin};
+    use statemachine::{Config, Estop, Mode};
     let ladder = statemachine::harness::arbitrary::ladder::<MOTORS>(src, Config::CDC);
     let mut safety = crate::Safety::from_ladder(ladder);
     let mut link = CdcLinkTask::new();
@@ -205,15 +216,7 @@ pub fn serial_estop_brakes_at_its_last_byte(src: &mut impl Source) {
         if i.saturating_add(1) < n {
             continue;
         }
-        check!(
-            safety.mode() == Mode::Brake,
-            "an ESTOP frame latches BRAKE at its last byte"
-        );
-        check!(
-            safety.ladder().estop_owners() & Origin::Primary.bit() != 0,
-            "the link holds the ESTOP it engaged"
-        );
-        check!(link.tx.len() > queued, "the ESTOP is acknowledged");
+        estop_latched_and_acknowledged(&safety, &link, queued);
     }
     cover!(src, was_running, "ESTOP while running");
     cover!(
