@@ -8,9 +8,10 @@
 //! `LinkTask::apply` turns into a ladder event:
 //! - bytes → result: `protocol`'s harnesses (`open` accepts only frames whose CRC matches; every
 //!   burst of up to 16 bits changes the CRC; every decode-loop step is total and makes progress);
-//! - result → ladder: the two harnesses here, from *any* valid ladder state, for *any* refusal and
-//!   any command a decoder can return ([`refusals_never_move_the_drive`],
-//!   [`decoded_commands_reach_the_ladder_as_sent`]), verified by Kani;
+//! - result → ladder: from *any* valid ladder state, for *any* refusal and any command a decoder
+//!   can return: a refusal is exactly one ladder refusal ([`link_refusal_is_one_ladder_refusal`],
+//!   with the ladder's INV-4 giving [`refusals_never_move_the_drive`]), a command reaches the
+//!   ladder as sent ([`decoded_commands_reach_the_ladder_as_sent`]), verified by Kani;
 //! - tick → bridge: [`tick_drives_the_bridge_as_the_ladder_says`], from any valid ladder state,
 //!   any board inputs and any bridge and ESTOP-latch state, verified by Kani.
 //!
@@ -234,7 +235,8 @@ pub fn valid_frame_delivers_the_sent_command(src: &mut impl Source) {
 
 /// INV-10 / INV-11, ladder side: whatever a link decoder refuses, for whatever reason, the event it
 /// becomes changes neither the command, nor the watchdog age, nor the rung, nor the drive; only the
-/// refusal counters move.
+/// refusal counters move. A twin only: under Kani it is [`link_refusal_is_one_ladder_refusal`]
+/// composed with the ladder's INV-4.
 pub fn refusals_never_move_the_drive(src: &mut impl Source) {
     let l0 = valid_ladder(src);
     assume!(src, l0.is_some());
@@ -242,6 +244,31 @@ pub fn refusals_never_move_the_drive(src: &mut impl Source) {
     let reason = arbitrary::reason(src);
     let l = through_link(&l0, Err(reason));
     assert_only_counted(&l0, &l);
+    cover!(src, reason == RejectReason::Crc, "refused by the CRC");
+    cover!(
+        src,
+        l0.last_valid().is_some() && l0.mode() != statemachine::Mode::Brake,
+        "refused while driving"
+    );
+}
+
+/// INV-10 / INV-11, the link task's half: whatever a decoder refuses, `LinkTask::apply` turns it into
+/// exactly one ladder refusal: the ladder after it equals, field for field, the ladder after
+/// `Event::Rejected(reason)`, from any valid state. With INV-4 (the ladder's refusal changes nothing
+/// applied and adds one to its reason's refusal count, verified for every valid state) this gives
+/// [`refusals_never_move_the_drive`], whose own Kani proof took 216 to 430 s against this one's 48 s.
+pub fn link_refusal_is_one_ladder_refusal(src: &mut impl Source) {
+    let l0 = valid_ladder(src);
+    assume!(src, l0.is_some());
+    let Some(l0) = l0 else { return };
+    let reason = arbitrary::reason(src);
+    let l = through_link(&l0, Err(reason));
+    let mut want = l0;
+    want.update(statemachine::Event::Rejected(reason));
+    assert!(
+        l == want,
+        "INV-10: the link task turns a refusal into exactly one ladder refusal"
+    );
     cover!(src, reason == RejectReason::Crc, "refused by the CRC");
     cover!(
         src,
@@ -340,10 +367,11 @@ mod verification {
     use super::*;
     use statemachine::harness::KaniSource;
 
+    /// Unwinding 100: the derived `==` of two ladders is a `memcmp` over their bytes.
     #[kani::proof]
-    #[kani::unwind(13)]
-    fn verify_refusals_never_move_the_drive() {
-        refusals_never_move_the_drive(&mut KaniSource);
+    #[kani::unwind(100)]
+    fn verify_link_refusal_is_one_ladder_refusal() {
+        link_refusal_is_one_ladder_refusal(&mut KaniSource);
     }
 
     #[kani::proof]
@@ -366,6 +394,11 @@ mod twins {
     #[test]
     fn refusals_never_move_the_drive() {
         Twin::run(24, 200_000, super::refusals_never_move_the_drive).assert_covered(2);
+    }
+
+    #[test]
+    fn link_refusal_is_one_ladder_refusal() {
+        Twin::run(27, 200_000, super::link_refusal_is_one_ladder_refusal).assert_covered(2);
     }
 
     #[test]
