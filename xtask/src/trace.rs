@@ -920,6 +920,20 @@ pub fn check(safety: &str, report: &str, code: &Code, sources: &[(String, String
         ));
     }
 
+    // the property ids the §4/§5 tables claim (a harness's property line must name one of them)
+    let mut claimed: BTreeSet<String> = BTreeSet::new();
+    for n in ["4", "5"] {
+        for (head, rows) in tables(&section(safety, n)) {
+            let first = head.first().map_or("", String::as_str);
+            if first == "INV" || first == "id" {
+                for (c, _) in rows {
+                    let id = c.first().map_or("", String::as_str);
+                    claimed.extend(ids(id, "INV").into_iter().chain(ids(id, "P")));
+                }
+            }
+        }
+    }
+
     // every harness named, with a property line and a twin
     for h in &code.harnesses {
         if !named.contains(&(h.name.clone(), h.file.clone())) {
@@ -938,6 +952,14 @@ pub fn check(safety: &str, report: &str, code: &Code, sources: &[(String, String
                 "{}: harness `{}`: the first doc line of `{}` names no property id (INV-n or P-n)",
                 h.file, h.name, h.body
             ));
+        }
+        for id in ids(doc, "INV").into_iter().chain(ids(doc, "P")) {
+            if !claimed.contains(&id) {
+                problems.push(format!(
+                    "{}: harness `{}`: the first doc line of `{}` names {id}, which no row of {s} §4/§5 claims",
+                    h.file, h.name, h.body
+                ));
+            }
         }
         let tests = code.tests.get(&h.file);
         let has = |t: &str| tests.is_some_and(|ts| ts.contains(t));
@@ -1395,6 +1417,18 @@ Not in this run: `verify_round_trip_ping`, `verify_round_trip_ack`.
         expect(
             &problems(SAFETY, REPORT, &code, PER_KIND),
             "control/src/verification.rs: harness `verify_thing_bounded`: the first doc line of `thing_bounded` names no property id (INV-n or P-n)",
+        );
+    }
+
+    #[test]
+    fn a_property_line_naming_an_unclaimed_id_is_reported() {
+        let code = CODE.replace(
+            "/// P-1: the thing stays bounded.",
+            "/// P-1, P-99: the thing stays bounded.",
+        );
+        expect(
+            &problems(SAFETY, REPORT, &code, PER_KIND),
+            "control/src/verification.rs: harness `verify_thing_bounded`: the first doc line of `thing_bounded` names P-99, which no row of proofs/SAFETY.md §4/§5 claims",
         );
     }
 

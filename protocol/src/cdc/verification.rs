@@ -564,7 +564,7 @@ pub(crate) fn check_round_trip_of(src: &mut impl Source, kind: u8) -> Message {
     m
 }
 
-/// P-6, P-21: The stream half of [`check_round_trip_of`] on its own (one CRC computation fewer under Kani).
+/// P-6, P-22: The stream half of [`check_round_trip_of`] on its own (one CRC computation fewer under Kani).
 pub(crate) fn check_stream_round_trip_of(src: &mut impl Source, kind: u8) {
     let m = any_message_of(src, kind);
     let mut buf = [0u8; MAX_FRAME_LEN];

@@ -27,7 +27,7 @@ fn any_msg(src: &mut impl Source) -> Msg {
     }
 }
 
-/// P-21: Both decoders return a command or a typed error for every input up to the robust frame size.
+/// P-4: Both decoders return a command or a typed error for every input up to the robust frame size.
 pub(crate) fn check_decode_total(src: &mut impl Source) {
     let mut buf = [0u8; ROBUST_BUF];
     // Under Kani any bytes of any length (shape 0) already include every frame; the other shapes
@@ -69,7 +69,7 @@ pub(crate) fn check_decode_total(src: &mut impl Source) {
     }
 }
 
-/// P-21: encode → decode round-trips in both formats, and the stream decoder delivers the robust
+/// P-6, P-22: encode → decode round-trips in both formats, and the stream decoder delivers the robust
 /// frame. A twin only: Kani proves the frame halves (`verify_legacy_round_trip`,
 /// `verify_robust_round_trip` and its pieces); the stream half stays a twin
 /// (`verify_stream_delivers_frame` is pending; `verify_robust_holds_back_no_frame` proves it for
@@ -81,20 +81,20 @@ pub(crate) fn check_round_trip(src: &mut impl Source) {
     let n = m.encode_legacy(&mut buf);
     assert!(
         n == Some(Msg::LEGACY_LEN),
-        "P-21: the legacy packet has the legacy length"
+        "P-6: the legacy packet has the legacy length"
     );
     assert!(
         Msg::decode_legacy(&buf[..Msg::LEGACY_LEN]) == Ok(m),
-        "P-21: the legacy packet decodes to the message sent"
+        "P-6: the legacy packet decodes to the message sent"
     );
     let n = m.encode_robust(&mut buf).unwrap_or(0);
     assert!(
         n == Msg::ROBUST_LEN,
-        "P-21: the robust frame has the robust length"
+        "P-6: the robust frame has the robust length"
     );
     assert!(
         Msg::decode_robust(&buf[..n]) == Ok(m),
-        "P-21: the robust frame decodes to the message sent"
+        "P-6: the robust frame decodes to the message sent"
     );
     let mut dec = RobustDecoder::<N>::new();
     let mut got = None;
@@ -105,7 +105,7 @@ pub(crate) fn check_round_trip(src: &mut impl Source) {
     }
     assert!(
         got == Some(Ok(m)),
-        "P-21: the stream decoder delivers the message sent"
+        "P-22: the stream decoder delivers the message sent"
     );
     cover!(src, m.cmd_type == CmdType::Mtrs, "motor command");
 }
@@ -155,7 +155,7 @@ pub(crate) fn check_body_round_trip(src: &mut impl Source) {
     cover!(src, body[..BODY].contains(&0), "body with a zero");
 }
 
-/// P-21: A frame's bytes fed to a fresh `RobustDecoder` give nothing until the terminator, and then
+/// P-22: A frame's bytes fed to a fresh `RobustDecoder` give nothing until the terminator, and then
 /// exactly what `decode_robust` says of the frame: any non-zero bytes of a frame's length, then 0x00.
 pub(crate) fn check_stream_delivers_frame(src: &mut impl Source) {
     let mut frame: [u8; FRAME] = src.bytes();
@@ -163,7 +163,7 @@ pub(crate) fn check_stream_delivers_frame(src: &mut impl Source) {
         // A valid frame (the twin would not draw one at random).
         assert!(
             any_msg(src).encode_robust(&mut frame) == Some(FRAME),
-            "P-21: a robust frame fills exactly one frame"
+            "P-22: a robust frame fills exactly one frame"
         );
     }
     for b in frame.iter_mut().take(FRAME - 1) {
@@ -176,13 +176,13 @@ pub(crate) fn check_stream_delivers_frame(src: &mut impl Source) {
     for &b in &frame[..FRAME - 1] {
         assert!(
             dec.push(b).is_none(),
-            "P-21: nothing is delivered before the terminator"
+            "P-22: nothing is delivered before the terminator"
         );
     }
     let got = dec.push(0);
     assert!(
         got == Some(Msg::decode_robust(&frame)),
-        "P-21: the stream answers as decode_robust of the frame"
+        "P-22: the stream answers as decode_robust of the frame"
     );
     cover!(src, got.is_some_and(|r| r.is_ok()), "command delivered");
     cover!(
