@@ -44,6 +44,19 @@ impl<const N: usize> Step<N> {
         let out = l.step(e);
         Some(Self { l0, e, l, out })
     }
+
+    /// A one-step body: draws a step with `event` (states that are not valid assumed away) and runs
+    /// `checks` on it.
+    fn run<S: Source>(
+        src: &mut S,
+        event: impl FnOnce(&mut S) -> Event<N>,
+        checks: impl FnOnce(&mut S, &Self),
+    ) {
+        let s = Self::draw(src, event);
+        assume!(src, s.is_some());
+        let Some(s) = s else { return };
+        checks(src, &s);
+    }
 }
 
 /// A tick half the time, otherwise any event (the twins meet ticks often; under Kani every event).
@@ -137,10 +150,7 @@ pub fn initial_state_is_valid<const N: usize>(src: &mut impl Source) {
 /// INV-0 (step), INV-2, INV-9: every event from every valid state keeps the invariant, never panics
 /// or overflows, and a late link is never NORMAL or REDUCED.
 pub fn step_preserves_invariant<const N: usize>(src: &mut impl Source) {
-    let s = Step::<N>::draw(src, |s| arbitrary::event(s));
-    assume!(src, s.is_some());
-    let Some(s) = s else { return };
-    invariant_kept(src, &s);
+    Step::<N>::run(src, |s| arbitrary::event(s), |s, st| invariant_kept(s, st));
 }
 
 fn invariant_kept<const N: usize>(src: &mut impl Source, s: &Step<N>) {
@@ -253,10 +263,11 @@ pub fn comm_loss_brakes_within_brake_after_ticks<const N: usize>(src: &mut impl 
 /// profile's `brake_after`", BRAKE comes at the latest at the `brake_after`-th tick after the last
 /// valid frame, for every profile (SAFETY.md §4, the induction argument).
 pub fn comm_loss_age_advances<const N: usize>(src: &mut impl Source) {
-    let s = Step::<N>::draw(src, |s| tick_or_no_valid_frame(s));
-    assume!(src, s.is_some());
-    let Some(s) = s else { return };
-    age_advances(src, &s);
+    Step::<N>::run(
+        src,
+        |s| tick_or_no_valid_frame(s),
+        |s, st| age_advances(s, st),
+    );
 }
 
 fn age_advances<const N: usize>(src: &mut impl Source, s: &Step<N>) {
@@ -312,10 +323,7 @@ fn age_advances<const N: usize>(src: &mut impl Source, s: &Step<N>) {
 /// rung's limit only while falling; in HOLD and STOP every value falls toward zero without changing
 /// sign; in BRAKE every value is zero.
 pub fn applied_within_mode_limit<const N: usize>(src: &mut impl Source) {
-    let s = Step::<N>::draw(src, |s| tick_or_any(s));
-    assume!(src, s.is_some());
-    let Some(s) = s else { return };
-    within_mode_limit(src, &s);
+    Step::<N>::run(src, |s| tick_or_any(s), |s, st| within_mode_limit(s, st));
 }
 
 fn within_mode_limit<const N: usize>(src: &mut impl Source, s: &Step<N>) {
@@ -380,10 +388,11 @@ fn within_mode_limit<const N: usize>(src: &mut impl Source, s: &Step<N>) {
 /// INV-4: a refused frame (below the ladder or by validation) leaves the command, the watchdog and the
 /// applied setpoints untouched.
 pub fn rejected_frames_change_nothing_applied<const N: usize>(src: &mut impl Source) {
-    let s = Step::<N>::draw(src, |s| refusal_or_frame(s));
-    assume!(src, s.is_some());
-    let Some(s) = s else { return };
-    refusal_changes_nothing(src, &s);
+    Step::<N>::run(
+        src,
+        |s| refusal_or_frame(s),
+        |s, st| refusal_changes_nothing(s, st),
+    );
 }
 
 fn refusal_changes_nothing<const N: usize>(src: &mut impl Source, s: &Step<N>) {
@@ -555,10 +564,11 @@ pub fn validated_setpoints_are_finite_and_in_range<const N: usize>(src: &mut imp
 /// sources that engaged it: it is released only by one of them or by the local input, never by
 /// another link; after an ESTOP latch a re-arm counts only from the source that released it.
 pub fn brake_left_only_by_rearm_and_fresh_frames<const N: usize>(src: &mut impl Source) {
-    let s = Step::<N>::draw(src, |s| arbitrary::event(s));
-    assume!(src, s.is_some());
-    let Some(s) = s else { return };
-    brake_left_only_by_rearm(src, &s);
+    Step::<N>::run(
+        src,
+        |s| arbitrary::event(s),
+        |s, st| brake_left_only_by_rearm(s, st),
+    );
 }
 
 fn brake_left_only_by_rearm<const N: usize>(src: &mut impl Source, s: &Step<N>) {
@@ -654,10 +664,7 @@ fn brake_left_only_by_rearm<const N: usize>(src: &mut impl Source, s: &Step<N>) 
 /// INV-7: overcurrent, overtemperature, encoder failure, undervoltage, the shutdown bit and ESTOP (from
 /// any source) turn the PWM off in the same step, from any state.
 pub fn latching_faults_cut_pwm_in_same_step<const N: usize>(src: &mut impl Source) {
-    let s = Step::<N>::draw(src, |s| latching_event(s));
-    assume!(src, s.is_some());
-    let Some(s) = s else { return };
-    latching_cuts_pwm(src, &s);
+    Step::<N>::run(src, |s| latching_event(s), |s, st| latching_cuts_pwm(s, st));
 }
 
 fn latching_cuts_pwm<const N: usize>(src: &mut impl Source, s: &Step<N>) {
@@ -691,10 +698,11 @@ fn latching_cuts_pwm<const N: usize>(src: &mut impl Source, s: &Step<N>) {
 /// `max_tick_step` (speeds, caps) or `duty_step` (duties) per tick, and only at a tick; an axis
 /// changes mode only from rest or into a passive mode.
 pub fn setpoint_step_is_bounded<const N: usize>(src: &mut impl Source) {
-    let s = Step::<N>::draw(src, |s| tick_or_any(s));
-    assume!(src, s.is_some());
-    let Some(s) = s else { return };
-    setpoint_step_bounded(src, &s);
+    Step::<N>::run(
+        src,
+        |s| tick_or_any(s),
+        |s, st| setpoint_step_bounded(s, st),
+    );
 }
 
 fn setpoint_step_bounded<const N: usize>(src: &mut impl Source, s: &Step<N>) {
@@ -766,10 +774,7 @@ fn setpoint_step_bounded<const N: usize>(src: &mut impl Source, s: &Step<N>) {
 /// INV-17, INV-15: outside BRAKE the drive each axis gets is its mode's: a passive command (coast,
 /// short) never becomes drive, and a position axis's target is within the travel.
 pub fn drive_follows_axis_modes<const N: usize>(src: &mut impl Source) {
-    let s = Step::<N>::draw(src, |s| tick_or_any(s));
-    assume!(src, s.is_some());
-    let Some(s) = s else { return };
-    drive_follows_modes(src, &s);
+    Step::<N>::run(src, |s| tick_or_any(s), |s, st| drive_follows_modes(s, st));
 }
 
 fn drive_follows_modes<const N: usize>(src: &mut impl Source, s: &Step<N>) {
@@ -829,17 +834,20 @@ fn drive_follows_modes<const N: usize>(src: &mut impl Source, s: &Step<N>) {
 /// proves what the eight prove; under Kani the step is encoded and solved once instead of eight
 /// times.
 pub fn one_step_properties<const N: usize>(src: &mut impl Source) {
-    let s = Step::<N>::draw(src, |s| tick_or_any(s));
-    assume!(src, s.is_some());
-    let Some(s) = s else { return };
-    invariant_kept(src, &s);
-    age_advances(src, &s);
-    within_mode_limit(src, &s);
-    refusal_changes_nothing(src, &s);
-    brake_left_only_by_rearm(src, &s);
-    latching_cuts_pwm(src, &s);
-    setpoint_step_bounded(src, &s);
-    drive_follows_modes(src, &s);
+    Step::<N>::run(
+        src,
+        |s| tick_or_any(s),
+        |s, st| {
+            invariant_kept(s, st);
+            age_advances(s, st);
+            within_mode_limit(s, st);
+            refusal_changes_nothing(s, st);
+            brake_left_only_by_rearm(s, st);
+            latching_cuts_pwm(s, st);
+            setpoint_step_bounded(s, st);
+            drive_follows_modes(s, st);
+        },
+    );
 }
 
 /// INV-1 cross-check on genuinely reachable states: from power-on, after any short event sequence,
@@ -968,8 +976,9 @@ pub mod model {
 /// horizon, N = 2 only: for N = 4 its conclusion is INV-18's induction; the reachable-prefix
 /// cross-check is a twin only). The eight one-step bodies are proven together by
 /// [`one_step_properties`] (their checks on one shared step: 126 s for N = 2 and 219 s for N = 4
-/// alone, against 292 s and 557 s as eight harnesses each, two at a time); `stubbed` bodies run with [`model::any_validation`]
-/// in place of [`validate_into`] (compositional: `validate_into` itself is proven by INV-5's harness).
+/// alone, against 292 s and 557 s as eight harnesses each, two at a time); `stubbed` bodies run
+/// with [`model::any_validation`] in place of [`validate_into`] (compositional: `validate_into`
+/// itself is proven by INV-5's harness).
 #[cfg(kani)]
 macro_rules! proofs {
     ($($kind:ident $body:ident => $two:ident $(, $four:ident)?;)*) => {
