@@ -17,7 +17,7 @@ use crate::rate::RateLimiter;
 use crate::sense::{adc_to_amps, SpeedEstimator};
 use crate::{within, Q};
 use statemachine::harness::Source;
-use statemachine::{assume, check, cover};
+use statemachine::{assume, check, cover, fail};
 
 fn q(src: &mut impl Source) -> Q {
     Q::from_bits(src.i32())
@@ -48,11 +48,11 @@ pub fn pid_bounded(src: &mut impl Source) {
     let mut pid = Pid::from_parts(g, integ, prev);
     let (r, y) = (q(src), q(src));
     let u = pid.step(r, y);
-    assert!(
+    check!(
         within(u, g.out_limit),
         "P-8: the PID output stays within its limit"
     );
-    assert!(
+    check!(
         pid.is_valid(),
         "P-8: the PID state stays valid (integrator within its limit)"
     );
@@ -90,15 +90,15 @@ pub fn current_pi_bounded(src: &mut impl Source) {
     let d1 = pi.step(r, y);
     let d2 = pi.step(q(src), q(src));
     let lim = pi.inner().gains().out_limit;
-    assert!(
+    check!(
         lim <= Q::ONE,
         "P-9: the current PI's duty limit is at most 1"
     );
-    assert!(
+    check!(
         within(d1, lim) && within(d2, lim),
         "P-9: both duties stay within the limit"
     );
-    assert!(
+    check!(
         pi.inner().is_valid(),
         "P-9: the current PI's state stays valid"
     );
@@ -115,7 +115,7 @@ pub fn rate_limiter_bounded(src: &mut impl Source) {
     let next = r.step(target);
     let d = i64::from(next.to_bits()).wrapping_sub(i64::from(start.to_bits()));
     let lim = i64::from(r.max_step().to_bits());
-    assert!(
+    check!(
         d <= lim && d >= lim.wrapping_neg(),
         "P-10: the limiter moves by at most its step"
     );
@@ -124,13 +124,13 @@ pub fn rate_limiter_bounded(src: &mut impl Source) {
     } else {
         (target, start)
     };
-    assert!(
+    check!(
         next >= lo && next <= hi,
         "P-10: the limiter never passes the target"
     );
     let gap = i64::from(target.to_bits()).wrapping_sub(i64::from(start.to_bits()));
     if gap.unsigned_abs() <= lim.unsigned_abs() {
-        assert!(
+        check!(
             next == target,
             "P-10: within one step of the target the limiter lands on it"
         );
@@ -159,7 +159,7 @@ const GEOMETRIES: [(Q, Q); 6] = [
 pub fn kinematics_total(src: &mut impl Source) {
     for &(base, radius) in &GEOMETRIES {
         let Ok(k) = DiffDrive::new(base, radius) else {
-            panic!("a listed geometry was refused");
+            fail!("a listed geometry was refused");
         };
         let t = Twist {
             v: q(src),
@@ -172,11 +172,11 @@ pub fn kinematics_total(src: &mut impl Source) {
             v: Q::ZERO,
             omega: Q::ZERO,
         });
-        assert!(
+        check!(
             zl == Q::ZERO,
             "P-12: zero twist gives a zero left wheel speed"
         );
-        assert!(
+        check!(
             zr == Q::ZERO,
             "P-12: zero twist gives a zero right wheel speed"
         );
@@ -184,8 +184,8 @@ pub fn kinematics_total(src: &mut impl Source) {
             v: t.v,
             omega: Q::ZERO,
         });
-        assert!(sl == sr, "P-12: a straight twist gives equal wheel speeds");
-        assert!(
+        check!(sl == sr, "P-12: a straight twist gives equal wheel speeds");
+        check!(
             k.forward(l, l).omega == Q::ZERO,
             "P-12: equal wheel speeds give no yaw"
         );
@@ -214,30 +214,30 @@ pub fn geometry_checked(src: &mut impl Source) {
     let k = DiffDrive::new(base, radius);
     match k {
         Ok(k) => {
-            assert!(
+            check!(
                 radius_ok && base_ok,
                 "P-12: only a geometry within the ranges is accepted"
             );
-            assert!(
+            check!(
                 k.wheelbase() == base,
                 "P-12: an accepted geometry keeps its wheelbase"
             );
-            assert!(
+            check!(
                 k.wheel_radius() == radius,
                 "P-12: an accepted geometry keeps its wheel radius"
             );
         }
-        Err(KinematicsError::WheelRadius) => assert!(
+        Err(KinematicsError::WheelRadius) => check!(
             !radius_ok,
             "P-12: a wheel radius refused only outside its range"
         ),
-        Err(KinematicsError::Wheelbase) => assert!(
+        Err(KinematicsError::Wheelbase) => check!(
             radius_ok && !base_ok,
             "P-12: a wheelbase refused only outside its range, after a good radius"
         ),
     }
     if radius_ok && base_ok {
-        assert!(k.is_ok(), "P-12: a geometry within the ranges is accepted");
+        check!(k.is_ok(), "P-12: a geometry within the ranges is accepted");
     }
     cover!(src, k.is_ok(), "geometry accepted");
     cover!(
@@ -257,19 +257,19 @@ pub fn bridge_compare_safe(src: &mut impl Source) {
     let duty = q(src);
     let arr = src.u16();
     let c = bridge_compare(duty, arr);
-    assert!(
+    check!(
         c.a <= arr && c.b <= arr,
         "P-11: both compares stay within ARR"
     );
-    assert!(c.a == 0 || c.b == 0, "P-11: never both high sides on");
+    check!(c.a == 0 || c.b == 0, "P-11: never both high sides on");
     if duty > Q::ZERO {
-        assert!(
+        check!(
             c.b == 0,
             "P-11: a positive duty leaves the reverse compare at zero"
         );
     }
     if duty < Q::ZERO {
-        assert!(
+        check!(
             c.a == 0,
             "P-11: a negative duty leaves the forward compare at zero"
         );
@@ -289,7 +289,7 @@ pub fn adc_scaling_bounded(src: &mut impl Source) {
     );
     let i = adc_to_amps(counts, offset, gain);
     let bound = gain.unsigned_abs().saturating_mul_int(4095);
-    assert!(
+    check!(
         i.unsigned_abs() <= bound,
         "P-12: the scaled ADC current stays within its bound"
     );
@@ -303,7 +303,7 @@ pub fn speed_estimator_total(src: &mut impl Source) {
     let mut e = SpeedEstimator::new(src.u16(), scale);
     for _ in 0..3 {
         let s = e.update(src.u16());
-        assert!(
+        check!(
             s.unsigned_abs() <= scale.unsigned_abs().saturating_mul_int(32_768),
             "P-12: the estimated speed stays within its bound"
         );

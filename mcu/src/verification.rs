@@ -41,20 +41,20 @@ pub fn current_loop_safe(src: &mut impl Source) {
     let raw = [src.u16(), src.u16()];
     let s = c.run(&mut b, raw, [amps(src), amps(src)]);
     for k in b.compares {
-        assert!(
+        check!(
             k.a <= arr && k.b <= arr,
             "compares stay within the auto-reload"
         );
-        assert!(k.a == 0 || k.b == 0, "never both high sides of one bridge");
+        check!(k.a == 0 || k.b == 0, "never both high sides of one bridge");
     }
     if s.tripped {
-        assert!(
+        check!(
             b.state == BridgeState::Brake,
             "a trip brakes the bridge in the same run"
         );
     }
     if b.state == BridgeState::Brake {
-        assert!(
+        check!(
             b.compares.iter().all(|k| k.a == 0 && k.b == 0),
             "a braked bridge gets no compares"
         );
@@ -83,13 +83,13 @@ pub fn speed_loop_bounded(src: &mut impl Source) {
     let s = l.run([src.u16(), src.u16()], setpoint);
     let limit = AMR.speed.out_limit;
     for i in s.refs {
-        assert!(
+        check!(
             control::within(i, limit),
             "current reference within the speed loop's limit"
         );
     }
     if setpoint.is_none() {
-        assert!(s.refs == [Q::ZERO; 2], "no current asked for in BRAKE");
+        check!(s.refs == [Q::ZERO; 2], "no current asked for in BRAKE");
     }
     cover!(src, s.refs.contains(&limit), "reference saturated");
 }
@@ -106,11 +106,11 @@ pub fn estop_press_brakes_at_once(src: &mut impl Source) {
     let pressed = src.bool();
     e.edge(&mut b, pressed);
     if pressed {
-        assert!(
+        check!(
             b.state == BridgeState::Brake,
             "a press brakes the bridge in its handler"
         );
-        assert!(
+        check!(
             e.poll(src.bool()) == Some(statemachine::Estop::Engage),
             "a press is reported even if released before the tick"
         );
@@ -126,7 +126,7 @@ pub fn micros_bounded(src: &mut impl Source) {
     let t = micros(ticks, src.u32(), src.bool(), period, 1000);
     let base = ticks.wrapping_mul(1000);
     let off = t.wrapping_sub(base);
-    assert!(
+    check!(
         off < 2000,
         "time stamp within one tick after the counted ticks"
     );

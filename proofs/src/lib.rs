@@ -34,7 +34,7 @@ use mcu::tick::{Runs, TickInputs};
 use mcu::{Bridge, BridgeState, EstopInput, LinkTask, Measurements, Safety, TickTask};
 use protocol::amr::{decode_command, encode_command, MotorCommand, FRAME_LEN};
 use statemachine::harness::{arbitrary, Source};
-use statemachine::{assume, cover, Drive, Estop, Mode, RejectReason, Speed};
+use statemachine::{assume, check, cover, Drive, Estop, Mode, RejectReason, Speed};
 
 /// The seed 000 board's ladder: two velocity-driven wheels.
 type Ladder = statemachine::Ladder<{ mcu::AXES }>;
@@ -82,11 +82,11 @@ fn plausible_command(src: &mut impl Source) -> MotorCommand {
 
 /// A refusal moved nothing but the counters: `l` is `l0` after one refused event.
 fn assert_only_counted(l0: &Ladder, l: &Ladder) {
-    assert!(
+    check!(
         unchanged(l0, l),
         "INV-10: a refusal leaves the ladder unchanged but for its counters"
     );
-    assert!(
+    check!(
         l.counters().rejected_total() == l0.counters().rejected_total().saturating_add(1),
         "INV-10: a refusal adds exactly one to the refusal count"
     );
@@ -99,7 +99,7 @@ fn check_delivered_as_sent(src: &mut impl Source, l0: &Ladder, l: &Ladder, cmd: 
     let accepted = l.counters().valid_frames != l0.counters().valid_frames;
     if accepted {
         let sp = l.last_valid();
-        assert!(
+        check!(
             sp.is_some(),
             "INV-12: an accepted frame leaves a valid command held"
         );
@@ -108,24 +108,24 @@ fn check_delivered_as_sent(src: &mut impl Source, l0: &Ladder, l: &Ladder, cmd: 
             let sent_l: Speed = Speed::from_num(cmd.left_speed_cmd);
             let sent_r: Speed = Speed::from_num(cmd.right_speed_cmd);
             let [left, right] = sp.axes.map(|a| a.target);
-            assert!(
+            check!(
                 left.saturating_sub(sent_l).saturating_abs() <= half,
                 "INV-12: the left speed is the sent one within one Q16.16 step"
             );
-            assert!(
+            check!(
                 right.saturating_sub(sent_r).saturating_abs() <= half,
                 "INV-12: the right speed is the sent one within one Q16.16 step"
             );
-            assert!(
+            check!(
                 sp.enable == cmd.enable,
                 "INV-12: the ladder holds the sent enable"
             );
-            assert!(
+            check!(
                 sp.seq() == Some(cmd.seq),
                 "INV-12: the ladder holds the sent sequence number"
             );
         }
-        assert!(l.age() == 0, "INV-12: a valid frame resets the age");
+        check!(l.age() == 0, "INV-12: a valid frame resets the age");
     }
     cover!(src, accepted, "accepted");
     cover!(
@@ -197,8 +197,8 @@ pub fn single_bit_flip_never_reaches_the_ladder(src: &mut impl Source) {
         *b ^= 1u8 << (bit % 8);
     }
     let (l, decoded) = receive(&l0, &frame);
-    assert!(!decoded, "a single bit flip never decodes");
-    assert!(
+    check!(!decoded, "a single bit flip never decodes");
+    check!(
         unchanged(&l0, &l),
         "INV-11: a flipped frame leaves the ladder unchanged but for its counters"
     );
@@ -225,7 +225,7 @@ pub fn valid_frame_delivers_the_sent_command(src: &mut impl Source) {
     let cmd = plausible_command(src);
     let mut frame = [0u8; FRAME_LEN];
     encode_command(&cmd, &mut frame);
-    assert!(
+    check!(
         decode_command(&frame) == Ok(cmd),
         "INV-12: a freshly encoded frame decodes to itself"
     );
@@ -265,7 +265,7 @@ pub fn link_refusal_is_one_ladder_refusal(src: &mut impl Source) {
     let l = through_link(&l0, Err(reason));
     let mut want = l0;
     want.update(statemachine::Event::Rejected(reason));
-    assert!(
+    check!(
         l == want,
         "INV-10: the link task turns a refusal into exactly one ladder refusal"
     );
@@ -332,20 +332,20 @@ pub fn tick_drives_the_bridge_as_the_ladder_says(src: &mut impl Source) {
     let o = tick.run(&mut safety, &inputs);
     o.drive(&mut bridge, &estop);
     let braked = bridge.state == BridgeState::Brake;
-    assert!(
+    check!(
         braked == (o.out.drive == Drive::Brake || pending),
         "the bridge runs exactly when the ladder drives and no ESTOP press is pending"
     );
     if safety.ladder().age() >= brake_after {
-        assert!(
+        check!(
             braked,
             "the tick at age >= brake_after leaves the bridge braked"
         );
     }
     if braked {
-        assert!(!bridge.tripped, "a braked tick clears the break flag");
+        check!(!bridge.tripped, "a braked tick clears the break flag");
     }
-    assert!(
+    check!(
         o.brake_release == (o.out.mode != Mode::Brake),
         "the holding brake is released only while the ladder drives"
     );

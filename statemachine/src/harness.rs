@@ -90,6 +90,24 @@ macro_rules! check {
     }};
 }
 
+/// A harness's failure with a static message naming the property: under Kani `kani::panic`, so a
+/// failing proof reports the message (Kani prints a placeholder for `panic!`'s in `no_std`
+/// crates), `panic!` under `cargo test`. For a path a property rules out, where `check!` would
+/// need a value to go on with.
+#[macro_export]
+macro_rules! fail {
+    ($msg:literal) => {{
+        #[cfg(kani)]
+        {
+            kani::panic($msg)
+        }
+        #[cfg(not(kani))]
+        {
+            panic!($msg)
+        }
+    }};
+}
+
 /// Symbolic inputs for Kani.
 #[cfg(kani)]
 pub struct KaniSource;

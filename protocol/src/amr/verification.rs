@@ -7,7 +7,7 @@
 
 use super::*;
 use statemachine::harness::Source;
-use statemachine::{assume, cover};
+use statemachine::{assume, check, cover, fail};
 
 pub(crate) fn any_command(src: &mut impl Source) -> MotorCommand {
     MotorCommand {
@@ -141,7 +141,7 @@ fn decode_total<S: Source, M>(
 ) {
     let f = shaped_frame(src, encode_valid);
     let r = decode(&f).map(|_| ());
-    assert!(
+    check!(
         matches!(
             r,
             Ok(())
@@ -204,12 +204,12 @@ pub(crate) fn check_command_round_trip(src: &mut impl Source) {
     encode_command(&cmd, &mut f);
     let r = decode_command(&f);
     if cmd.control_mode <= 0xFF {
-        assert!(
+        check!(
             matches!(r, Ok(d) if same_command(&d, &cmd)),
             "P-6: a command with an in-range mode decodes to itself"
         );
     } else {
-        assert!(
+        check!(
             r == Err(RejectReason::Decode),
             "P-6: a command with an out-of-range mode is refused as Decode"
         );
@@ -227,12 +227,12 @@ pub(crate) fn check_feedback_round_trip(src: &mut impl Source) {
     encode_feedback(&fb, &mut f);
     let r = decode_feedback(&f);
     if fb.fault_flags <= 0xFFFF && fb.mode <= 0xFF {
-        assert!(
+        check!(
             matches!(r, Ok(d) if same_feedback(&d, &fb)),
             "P-6: feedback with an in-range mode decodes to itself"
         );
     } else {
-        assert!(
+        check!(
             r == Err(RejectReason::Decode),
             "P-6: feedback with an out-of-range mode is refused as Decode"
         );
@@ -253,25 +253,25 @@ pub(crate) fn check_info_round_trip(src: &mut impl Source) {
     let info = any_info(src);
     let mut f = [0u8; FRAME_LEN];
     encode_info(&info, &mut f);
-    assert!(
+    check!(
         decode_info(&f) == Ok(info),
         "P-6: an identity frame decodes to the identity sent"
     );
-    assert!(
+    check!(
         decode_mcu_frame(&f) == Ok(McuFrame::Info(info)),
         "P-6: an identity frame decodes as McuFrame::Info of the identity sent"
     );
-    assert!(
+    check!(
         decode_feedback(&f) == Err(RejectReason::Version),
         "P-6: the feedback decoder refuses an identity frame as Version"
     );
-    assert!(
+    check!(
         decode_command(&f) == Err(RejectReason::Version),
         "P-6: the command decoder refuses an identity frame as Version"
     );
     let mut g = [0u8; FRAME_LEN];
     encode_feedback(&any_feedback(src), &mut g);
-    assert!(
+    check!(
         decode_info(&g) == Err(RejectReason::Version),
         "P-6: the identity decoder refuses a feedback frame as Version"
     );
@@ -292,7 +292,7 @@ pub(crate) fn check_command_bit_flip_detected(src: &mut impl Source) {
     encode_command(&cmd, &mut f);
     let bit = usize::from(src.u16() % (FRAME_LEN as u16 * 8));
     f[bit / 8] ^= 1 << (bit % 8);
-    assert!(
+    check!(
         decode_command(&f).is_err(),
         "P-7: a command frame with one bit flipped is refused"
     );
@@ -319,7 +319,7 @@ pub(crate) fn check_feedback_bit_flip_detected(src: &mut impl Source) {
     encode_feedback(&fb, &mut f);
     let bit = usize::from(src.u16() % (FRAME_LEN as u16 * 8));
     f[bit / 8] ^= 1 << (bit % 8);
-    assert!(
+    check!(
         decode_feedback(&f).is_err(),
         "P-7: a feedback frame with one bit flipped is refused"
     );
@@ -346,21 +346,21 @@ pub(crate) fn check_open_total(src: &mut impl Source) {
     let r = open(&f);
     match r {
         Ok(p) => {
-            assert!(crc_good, "P-3: a frame opens only with a matching CRC");
-            assert!(
+            check!(crc_good, "P-3: a frame opens only with a matching CRC");
+            check!(
                 p.len() == usize::from(f[LEN_OFFSET]),
                 "P-3: an opened payload has the length byte's length"
             );
-            assert!(
+            check!(
                 p.len() <= MAX_PAYLOAD,
                 "P-3: an opened payload fits the frame"
             );
         }
-        Err(RejectReason::Crc) => assert!(!crc_good, "P-3: a Crc refusal only for a wrong CRC"),
+        Err(RejectReason::Crc) => check!(!crc_good, "P-3: a Crc refusal only for a wrong CRC"),
         Err(RejectReason::Framing) => {
-            assert!(crc_good, "P-3: a Framing refusal only with a good CRC")
+            check!(crc_good, "P-3: a Framing refusal only with a good CRC")
         }
-        Err(_) => panic!("open refused for a reason it does not check"),
+        Err(_) => fail!("open refused for a reason it does not check"),
     }
     cover!(src, r.is_ok(), "frame opened");
     cover!(src, r == Err(RejectReason::Crc), "crc refused");
@@ -398,17 +398,17 @@ pub(crate) fn check_open_shape(src: &mut impl Source) {
     let r = open(&f);
     match r {
         Ok(p) => {
-            assert!(
+            check!(
                 p.len() == usize::from(f[LEN_OFFSET]),
                 "P-3: an opened payload has the length byte's length"
             );
-            assert!(
+            check!(
                 p.len() <= MAX_PAYLOAD,
                 "P-3: an opened payload fits the frame"
             );
         }
         Err(RejectReason::Crc | RejectReason::Framing) => {}
-        Err(_) => panic!("open refused for a reason it does not check"),
+        Err(_) => fail!("open refused for a reason it does not check"),
     }
     cover!(src, r.is_ok(), "frame opened");
     cover!(src, r == Err(RejectReason::Crc), "crc refused");
@@ -428,7 +428,7 @@ pub(crate) fn check_bit_flip_refused_by_open(src: &mut impl Source, f: &[u8; FRA
     let bit = usize::from(src.u16() % (FRAME_LEN as u16 * 8));
     let mut g = *f;
     g[bit / 8] ^= 1 << (bit % 8);
-    assert!(
+    check!(
         open(&g).map(|_| ()) == Err(RejectReason::Crc),
         "P-7: a single-bit flip of a sealed command frame is refused as Crc"
     );
@@ -475,7 +475,7 @@ fn field_step<S: Source, M>(
     let mut r = Reader::new(&buf[..len]);
     match r.next_field() {
         Ok(Some((field, v))) => {
-            assert!(
+            check!(
                 r.remaining() + 2 <= len,
                 "P-3: each decode-loop step consumes at least 2 bytes"
             );
@@ -484,7 +484,7 @@ fn field_step<S: Source, M>(
             Some((field, applied))
         }
         Ok(None) => {
-            assert!(
+            check!(
                 len == 0,
                 "P-3: the decode loop ends only when the payload is used up"
             );
@@ -690,13 +690,13 @@ fn field_round_trip<S: Source, M: Copy + Default>(
         write(&mut w, m, field);
         w.len()
     };
-    assert!(
+    check!(
         n <= max(field),
         "P-6: a field takes at most its bound's bytes"
     );
     if n == 0 {
         // Omitted: the decoded message keeps the default, which is `m`'s value.
-        assert!(
+        check!(
             same(&with(default, m, field), &default),
             "P-6: only a default value is omitted"
         );
@@ -706,26 +706,26 @@ fn field_round_trip<S: Source, M: Copy + Default>(
     let total = n + usize::from(src.u8()) % (FIELD_BUF - n + 1);
     let mut r = Reader::new(&buf[..total]);
     let Ok(Some((read, v))) = r.next_field() else {
-        panic!("a written field did not read back");
+        fail!("a written field did not read back");
     };
-    assert!(
+    check!(
         read == field,
         "P-6: the field read back is the field written"
     );
-    assert!(
+    check!(
         r.remaining() == total - n,
         "P-6: one decode-loop step consumes exactly the field's bytes"
     );
     let mut got = state;
     let applied = apply(&mut got, read, v);
     if in_range {
-        assert!(applied.is_ok(), "P-6: an in-range field is applied");
-        assert!(
+        check!(applied.is_ok(), "P-6: an in-range field is applied");
+        check!(
             same(&got, &with(state, m, field)),
             "P-6: the field read back sets exactly that member"
         );
     } else {
-        assert!(applied.is_err(), "P-6: an out-of-range field is refused");
+        check!(applied.is_err(), "P-6: an out-of-range field is refused");
     }
     (n, applied)
 }
@@ -775,7 +775,7 @@ pub(crate) fn check_info_field_round_trip(src: &mut impl Source) {
     let field = f::ALL[usize::from(src.below(f::ALL.len() as u8))];
     let state = (any_info(src), src.u32());
     let (n, applied) = field_round_trip(src, &INFO_FIELDS, &info, field, state, true);
-    assert!(
+    check!(
         applied.is_ok(),
         "P-6: every identity field read back is applied"
     );
@@ -796,13 +796,13 @@ pub(crate) fn check_seal_open(src: &mut impl Source) {
     f[PAYLOAD_OFFSET + len..CRC_OFFSET].fill(0);
     seal(&mut f, len);
     let Ok(opened) = open(&f) else {
-        panic!("a sealed frame was refused");
+        fail!("a sealed frame was refused");
     };
-    assert!(
+    check!(
         opened.len() == len,
         "P-6: a sealed frame opens to a payload of the sealed length"
     );
-    assert!(
+    check!(
         core::ptr::eq(opened.as_ptr(), f[PAYLOAD_OFFSET..].as_ptr()),
         "P-6: the payload is opened in place"
     );

@@ -33,7 +33,7 @@
 
 use super::checksum;
 use statemachine::harness::Source;
-use statemachine::{assume, cover};
+use statemachine::{assume, check, cover};
 
 /// Longest run of covered bytes checked: the seed 000 frame body (62 bytes), which is longer than
 /// every seed 001 frame of the seed's messages and the Teensy robust frame's stuffed bytes up to 10
@@ -109,7 +109,7 @@ pub(crate) fn check_bursts_detected(src: &mut impl Source, order: Order, n: usiz
     assume!(src, burst.is_some());
     let Some(e) = burst else { return };
     let zeros = [0u8; MAX_COVERED];
-    assert!(
+    check!(
         syndrome(&e, n, order, checksum(&zeros[..n])) != 0,
         "P-1: the burst changes the CRC check (non-zero syndrome)"
     );

@@ -5,8 +5,8 @@
 #![cfg_attr(kani, allow(dead_code))]
 
 use super::*;
-use statemachine::cover;
 use statemachine::harness::Source;
+use statemachine::{check, cover, fail};
 
 fn any_motor_mode(src: &mut impl Source) -> MotorMode {
     MotorMode::from_raw(src.below(5)).unwrap_or_default()
@@ -78,7 +78,7 @@ pub(crate) fn check_decode_total(src: &mut impl Source) {
         rx[i] = src.u8();
     }
     let r = decode_rx(&rx);
-    assert!(
+    check!(
         matches!(
             r,
             Ok(_) | Err(RejectReason::Version | RejectReason::Parity | RejectReason::Decode)
@@ -90,7 +90,7 @@ pub(crate) fn check_decode_total(src: &mut impl Source) {
         *b = src.u8();
     }
     let t = decode_tx(&tx);
-    assert!(
+    check!(
         matches!(t, Ok(_) | Err(RejectReason::Version)),
         "P-4: decode_tx returns a buffer or Version"
     );
@@ -110,13 +110,13 @@ pub(crate) fn check_round_trip(src: &mut impl Source) {
     let mut again = [0u8; RX_LEN];
     match d {
         Ok(d) => encode_rx(&d, &mut again),
-        Err(_) => panic!("valid rx refused"),
+        Err(_) => fail!("valid rx refused"),
     }
-    assert!(
+    check!(
         b == again,
         "P-6: the received buffer re-encodes to the same bytes"
     );
-    assert!(
+    check!(
         parity_ok(u32::from_le_bytes([b[1], b[2], b[3], b[4]])),
         "P-6: an encoded buffer has a good parity"
     );
@@ -133,9 +133,9 @@ pub(crate) fn check_round_trip(src: &mut impl Source) {
     let mut t2 = [0u8; TX_LEN];
     match decode_tx(&t) {
         Ok(d) => encode_tx(&d, &mut t2),
-        Err(_) => panic!("valid tx refused"),
+        Err(_) => fail!("valid tx refused"),
     }
-    assert!(t == t2, "P-6: the transmitted buffer decodes to itself");
+    check!(t == t2, "P-6: the transmitted buffer decodes to itself");
     cover!(
         src,
         rx.updates.0.count_ones().is_multiple_of(2),
@@ -151,7 +151,7 @@ pub(crate) fn check_updates_bit_flip_detected(src: &mut impl Source) {
     encode_rx(&rx, &mut b);
     let bit = usize::from(src.below(32));
     b[1 + bit / 8] ^= 1 << (bit % 8);
-    assert!(
+    check!(
         decode_rx(&b) == Err(RejectReason::Parity),
         "P-7: a flip in the updates word is refused as Parity"
     );
