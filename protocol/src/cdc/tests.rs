@@ -418,3 +418,45 @@ fn a_payload_that_carries_a_whole_frame_is_received_as_that_frame() {
         "the stream yields the PING and not the IMU frame"
     );
 }
+
+/// P-4, the half of `append` that `verify_append` leaves to this test: from every state with a full
+/// buffer (every `first`, so every number of bytes moved) and every state without (every `len`),
+/// each byte kept ends up where the bytes held before it say. `append` copies bytes without
+/// reading them (its only data-dependent statement is the store of the byte pushed), so what it
+/// does to the buffer is one fixed selection of positions per `(len, first)`; two passes, tagged
+/// with the low and the high byte of each position, name that selection exactly, whatever the
+/// bytes are.
+#[test]
+fn append_keeps_the_bytes_in_order() {
+    let mut states = 0u32;
+    for len in 0..=MAX_FRAME_LEN {
+        for first in 0..=len {
+            for tag in [|i: usize| i as u8, |i: usize| (i >> 8) as u8] {
+                let mut dec = StreamDecoder::new();
+                for (i, b) in dec.buf.iter_mut().enumerate() {
+                    *b = tag(i);
+                }
+                dec.len = len;
+                dec.first = first;
+                dec.append(0xEE);
+                // The position each byte now held came from: moved down by `gone` when full.
+                let gone = if len == MAX_FRAME_LEN {
+                    first.max(1)
+                } else {
+                    0
+                };
+                assert_eq!(dec.len, len - gone + 1, "len={len} first={first}");
+                assert_eq!(dec.buf[dec.len - 1], 0xEE, "len={len} first={first}");
+                for j in 0..dec.len - 1 {
+                    assert_eq!(dec.buf[j], tag(j + gone), "len={len} first={first} j={j}");
+                }
+            }
+            states += 1;
+        }
+    }
+    // Every (len, first) with first <= len <= MAX_FRAME_LEN: (n + 1)(n + 2) / 2 for n = MAX_FRAME_LEN.
+    assert_eq!(
+        states as usize,
+        (MAX_FRAME_LEN + 1) * (MAX_FRAME_LEN + 2) / 2
+    );
+}

@@ -128,7 +128,7 @@ pub(crate) fn check_stream_total(src: &mut impl Source) {
         fed += n;
         for &b in &chunk[..n] {
             let r = dec.push(b);
-            assert!(
+            check!(
                 dec.buffered() <= MAX_FRAME_LEN,
                 "P-4: the stream decoder holds at most one frame"
             );
@@ -141,16 +141,16 @@ pub(crate) fn check_stream_total(src: &mut impl Source) {
         }
     }
     let s = dec.stats();
-    assert!(
+    check!(
         s.frames == ok,
         "P-4: the stream counts every frame it delivers"
     );
-    assert!(
+    check!(
         s.message_errors == message_errors,
         "P-4: the stream counts every message error it reports"
     );
     // One `Err(Crc)` reports every candidate that failed at that byte.
-    assert!(
+    check!(
         crc_results <= s.crc_errors,
         "P-4: every CRC error reported is counted"
     );
@@ -223,7 +223,8 @@ pub(crate) fn check_candidate_at(src: &mut impl Source) {
 /// P-4: `append` from any state (any bytes, any count held and dropped, any counters): the byte goes
 /// last; when the buffer is full the bytes held first move to its front (the oldest byte goes,
 /// counted, if none was dropped), in order; nothing else changes. [`model::append`] stands in for
-/// it with the counts alone.
+/// it with the counts alone. The order of the bytes moved is the exhaustive test's
+/// (`append_keeps_the_bytes_in_order`); Kani proves the rest.
 pub(crate) fn check_append(src: &mut impl Source) {
     let mut dec = StreamDecoder::new();
     dec.buf = src.bytes();
@@ -243,12 +244,18 @@ pub(crate) fn check_append(src: &mut impl Source) {
         "append keeps the bytes held and adds one"
     );
     check!(dec.buf[dec.len - 1] == byte, "the byte goes last");
-    let j = usize::from(src.u16_below(MAX_FRAME_LEN as u16));
-    if j + 1 < dec.len {
-        check!(
-            dec.buf[j] == before.buf[j + gone],
-            "the bytes kept stay in order"
-        );
+    // Where the bytes kept go is checked here by the twin, and for every state by the exhaustive
+    // test `append_keeps_the_bytes_in_order` (`append` moves bytes without reading them, so
+    // position-tagged bytes stand for any). Under Kani, a symbolic index into a buffer moved by a
+    // symbolic offset made this one check take 200 s of the harness's 227 s.
+    if !cfg!(kani) {
+        let j = usize::from(src.u16_below(MAX_FRAME_LEN as u16));
+        if j + 1 < dec.len {
+            check!(
+                dec.buf[j] == before.buf[j + gone],
+                "the bytes kept stay in order"
+            );
+        }
     }
     let counted = u32::from(full && before.first == 0);
     check!(
@@ -581,14 +588,14 @@ fn stream_delivers(m: &Message, buf: &[u8; MAX_FRAME_LEN], n: usize) {
     for (i, &b) in buf[..n].iter().enumerate() {
         if let Some(r) = dec.push(b) {
             // Delivered at the frame's last byte, not before.
-            assert!(
+            check!(
                 i + 1 == n,
                 "P-6: a frame is delivered at its last byte, not before"
             );
             got = Some(r);
         }
     }
-    assert!(
+    check!(
         got == Some(Ok(*m)),
         "P-6: the stream delivers the message sent"
     );
@@ -604,11 +611,11 @@ pub(crate) fn check_frame_round_trip_of(
     let m = any_message_of(src, kind);
     let mut buf = [0u8; MAX_FRAME_LEN];
     let n = m.encode(&mut buf);
-    assert!(
+    check!(
         n == HEADER_LEN + m.id().payload_len() + CRC_LEN,
         "P-6: a frame has its kind's length"
     );
-    assert!(
+    check!(
         decode_frame(&buf[..n]) == Ok(m),
         "P-6: a frame decodes to the message sent"
     );
@@ -669,9 +676,9 @@ pub(crate) fn check_bit_flip_detected_in(src: &mut impl Source, m: &Message, reg
         }
     }
     let r = decode_frame(&buf[..n]);
-    assert!(r.is_err(), "P-7: a frame with one bit flipped is refused");
+    check!(r.is_err(), "P-7: a frame with one bit flipped is refused");
     if region == Flip::LenByte {
-        assert!(
+        check!(
             r == Err(Error::Framing),
             "P-7: a flip of the LEN byte is refused as Framing"
         );

@@ -71,28 +71,27 @@ pub(crate) fn check_decode_total(src: &mut impl Source) {
 
 /// P-6, P-22: encode → decode round-trips in both formats, and the stream decoder delivers the robust
 /// frame. A twin only: Kani proves the frame halves (`verify_legacy_round_trip`,
-/// `verify_robust_round_trip` and its pieces); the stream half stays a twin
-/// (`verify_stream_delivers_frame` is pending; `verify_robust_holds_back_no_frame` proves it for
-/// the sample command).
+/// `verify_robust_round_trip` and its pieces) and the stream half (`verify_stream_delivers_frame`,
+/// and `verify_robust_holds_back_no_frame` for the sample command with the real decoder).
 #[cfg_attr(kani, allow(dead_code))]
 pub(crate) fn check_round_trip(src: &mut impl Source) {
     let m = any_msg(src);
     let mut buf = [0u8; ROBUST_BUF];
     let n = m.encode_legacy(&mut buf);
-    assert!(
+    check!(
         n == Some(Msg::LEGACY_LEN),
         "P-6: the legacy packet has the legacy length"
     );
-    assert!(
+    check!(
         Msg::decode_legacy(&buf[..Msg::LEGACY_LEN]) == Ok(m),
         "P-6: the legacy packet decodes to the message sent"
     );
     let n = m.encode_robust(&mut buf).unwrap_or(0);
-    assert!(
+    check!(
         n == Msg::ROBUST_LEN,
         "P-6: the robust frame has the robust length"
     );
-    assert!(
+    check!(
         Msg::decode_robust(&buf[..n]) == Ok(m),
         "P-6: the robust frame decodes to the message sent"
     );
@@ -103,7 +102,7 @@ pub(crate) fn check_round_trip(src: &mut impl Source) {
             got = Some(r);
         }
     }
-    assert!(
+    check!(
         got == Some(Ok(m)),
         "P-22: the stream decoder delivers the message sent"
     );
@@ -119,11 +118,11 @@ pub(crate) fn check_round_trip(src: &mut impl Source) {
 pub(crate) fn check_robust_round_trip(src: &mut impl Source) {
     let m = any_msg(src);
     let mut buf = [0u8; FRAME];
-    assert!(
+    check!(
         m.encode_robust(&mut buf) == Some(FRAME),
         "P-6: the robust frame has the robust length"
     );
-    assert!(
+    check!(
         Msg::decode_robust(&buf) == Ok(m),
         "P-6: the robust frame decodes to the message sent"
     );
@@ -140,15 +139,15 @@ pub(crate) fn check_robust_round_trip(src: &mut impl Source) {
 pub(crate) fn check_body_round_trip(src: &mut impl Source) {
     let m = any_msg(src);
     let mut body = [0u8; ROBUST_BODY_BUF];
-    assert!(
+    check!(
         m.encode_body(&mut body) == Some(BODY),
         "P-6: the robust body has the body length"
     );
-    assert!(
+    check!(
         body[0] == ROBUST_VERSION,
         "P-6: the robust body starts with the version"
     );
-    assert!(
+    check!(
         Msg::decode_body(&body[..BODY]) == Ok(m),
         "P-6: the robust body decodes to the message sent"
     );
@@ -157,11 +156,13 @@ pub(crate) fn check_body_round_trip(src: &mut impl Source) {
 
 /// P-22: A frame's bytes fed to a fresh `RobustDecoder` give nothing until the terminator, and then
 /// exactly what `decode_robust` says of the frame: any non-zero bytes of a frame's length, then 0x00.
+/// Under Kani from the state those bytes leave (see the body) and with `decode_robust` an
+/// uninterpreted function of the bytes.
 pub(crate) fn check_stream_delivers_frame(src: &mut impl Source) {
     let mut frame: [u8; FRAME] = src.bytes();
     if !cfg!(kani) && src.bool() {
         // A valid frame (the twin would not draw one at random).
-        assert!(
+        check!(
             any_msg(src).encode_robust(&mut frame) == Some(FRAME),
             "P-22: a robust frame fills exactly one frame"
         );
@@ -173,14 +174,30 @@ pub(crate) fn check_stream_delivers_frame(src: &mut impl Source) {
     }
     frame[FRAME - 1] = 0;
     let mut dec = RobustDecoder::<N>::new();
-    for &b in &frame[..FRAME - 1] {
-        assert!(
-            dec.push(b).is_none(),
-            "P-22: nothing is delivered before the terminator"
+    if cfg!(kani) {
+        // What pushing the frame's non-zero bytes into a fresh decoder leaves, by induction on
+        // `verify_robust_push_step` (a non-zero byte answers nothing and is kept last, the bytes
+        // held before it kept in order; none is dropped below the limit, `ROBUST_LEN − 1`): those
+        // bytes, held from the front. The bytes after them are any. Pushed one by one, the
+        // solver's symbolic execution cannot rule out a 0x00 among them and follows the
+        // terminator's path at every byte (still running after 12 min at 8.1 GB).
+        dec.buf = src.bytes();
+        dec.buf[..FRAME - 1].copy_from_slice(&frame[..FRAME - 1]);
+        dec.len = FRAME - 1;
+    } else {
+        for &b in &frame[..FRAME - 1] {
+            check!(
+                dec.push(b).is_none(),
+                "P-22: nothing is delivered before the terminator"
+            );
+        }
+        check!(
+            dec.len == FRAME - 1 && dec.buf[..FRAME - 1] == frame[..FRAME - 1],
+            "P-22: the frame's bytes are held from the front before its terminator"
         );
     }
     let got = dec.push(0);
-    assert!(
+    check!(
         got == Some(Msg::decode_robust(&frame)),
         "P-22: the stream answers as decode_robust of the frame"
     );
@@ -201,7 +218,7 @@ pub(crate) fn check_stream_delivers_frame(src: &mut impl Source) {
 /// frame of that length.
 pub(crate) fn check_bit_flip_refused<const M: usize>(src: &mut impl Source, f: &[u8]) {
     let n = CmdMsg::<M>::ROBUST_LEN;
-    assert!(
+    check!(
         f.len() == n && CmdMsg::<M>::decode_robust(f).is_ok(),
         "P-7: the frame flipped is a valid robust frame"
     );
@@ -211,7 +228,7 @@ pub(crate) fn check_bit_flip_refused<const M: usize>(src: &mut impl Source, f: &
     g[bit / 8] ^= 1 << (bit % 8);
     let r = CmdMsg::<M>::decode_robust(&g[..n]).map(|_| ());
     let terminator = bit / 8 == n - 1;
-    assert!(
+    check!(
         r == Err(if terminator {
             RejectReason::Framing
         } else {
@@ -233,14 +250,14 @@ pub(crate) fn check_bit_flip_refused<const M: usize>(src: &mut impl Source, f: &
 /// three bytes flipped, `check_value` refuses them or gives another value.
 pub(crate) fn check_check_bytes_of(crc: u16, bit: usize) {
     let k = check_bytes(crc);
-    assert!(k.iter().all(|&b| b != 0), "P-6: no check byte is 0x00");
-    assert!(
+    check!(k.iter().all(|&b| b != 0), "P-6: no check byte is 0x00");
+    check!(
         check_value(k) == Some(crc),
         "P-6: the check bytes give back the CRC"
     );
     let mut g = k;
     g[bit / 8] ^= 1 << (bit % 8);
-    assert!(
+    check!(
         check_value(g) != Some(crc),
         "P-7: check bytes with one bit flipped are refused or give another value"
     );
@@ -274,7 +291,7 @@ pub(crate) fn check_legacy_total(src: &mut impl Source) {
         }
     }
     let r = Msg::decode_legacy(&buf[..n]);
-    assert!(
+    check!(
         matches!(r, Ok(_) | Err(RejectReason::Framing | RejectReason::Decode)),
         "P-4: decode_legacy returns a message or one of its typed errors"
     );
@@ -303,7 +320,7 @@ pub(crate) fn check_robust_total(src: &mut impl Source) {
         }
     }
     let r = Msg::decode_robust(&buf[..n]);
-    assert!(
+    check!(
         matches!(
             r,
             Ok(_)
@@ -481,7 +498,7 @@ fn sample() -> Msg {
 /// The robust frame of [`sample`] (the Kani bit-flip harness's frame).
 pub(crate) fn sample_frame() -> [u8; FRAME] {
     let mut f = [0u8; FRAME];
-    assert!(
+    check!(
         sample().encode_robust(&mut f) == Some(FRAME),
         "P-7: the sample frame has the robust length"
     );
@@ -498,7 +515,7 @@ const FRAME: usize = robust_len(N);
 /// [`stuff_into`] for a body of the harnesses' motor count.
 fn stuff(body: &[u8; BODY]) -> [u8; STUFFED] {
     let mut stuffed = [0u8; STUFFED];
-    assert!(
+    check!(
         stuff_into(body, &mut stuffed) == Some(STUFFED),
         "P-6: a stuffed body fills exactly one block"
     );
@@ -526,25 +543,25 @@ pub(crate) fn check_unstuff_inverts_stuff(src: &mut impl Source) {
         with_zeros(src, &mut body);
     }
     let stuffed = stuff(&body);
-    assert!(
+    check!(
         stuffed.iter().all(|&b| b != 0),
         "P-6: a stuffed block holds no zero byte"
     );
     let mut out = [0u8; BODY];
-    assert!(
+    check!(
         unstuff(&stuffed, &mut out) == Some(BODY),
         "P-6: unstuffing a stuffed body gives a body of the body length"
     );
-    assert!(out == body, "P-6: unstuff gives back the body stuffed");
+    check!(out == body, "P-6: unstuff gives back the body stuffed");
     // corncobs is a dev-dependency: the Kani build, which has none, leaves the cross-check out.
     #[cfg(not(kani))]
     {
         let mut reference = [0u8; STUFFED + 1];
-        assert!(
+        check!(
             corncobs::encode_buf(&body, &mut reference) == STUFFED + 1,
             "P-6: corncobs' encoder writes one block and a terminator"
         );
-        assert!(
+        check!(
             reference[..STUFFED] == stuffed && reference[STUFFED] == 0,
             "P-6: corncobs' encoder writes the block stuff_into writes"
         );
@@ -578,14 +595,14 @@ pub(crate) fn check_unstuff_total(src: &mut impl Source) {
     let mut out = [0u8; BODY + 1];
     let r = unstuff(block, &mut out);
     if let Some(len) = r {
-        assert!(
+        check!(
             len + 1 == n,
             "P-4: an accepted block of n bytes decodes to n - 1 bytes"
         );
         if n == STUFFED {
             let mut body = [0u8; BODY];
             body.copy_from_slice(&out[..BODY]);
-            assert!(
+            check!(
                 stuff(&body)[..] == *block,
                 "P-4: unstuff accepts only blocks stuff_into makes"
             );
@@ -603,12 +620,12 @@ pub(crate) fn check_unstuff_total(src: &mut impl Source) {
             Ok(len) if no_zero && len + 1 == n => Some(len),
             _ => None,
         };
-        assert!(
+        check!(
             accepted == r,
             "P-4: unstuff accepts exactly the blocks corncobs' decoder accepts"
         );
         if let Some(len) = r {
-            assert!(
+            check!(
                 reference[..len] == out[..len],
                 "P-4: unstuff decodes as corncobs' decoder does"
             );
@@ -631,15 +648,111 @@ pub(crate) fn check_unstuff_total(src: &mut impl Source) {
 pub(crate) fn check_legacy_round_trip(src: &mut impl Source) {
     let m = any_msg(src);
     let mut buf = [0u8; Msg::LEGACY_LEN];
-    assert!(
+    check!(
         m.encode_legacy(&mut buf) == Some(Msg::LEGACY_LEN),
         "P-6: the legacy packet has the legacy length"
     );
-    assert!(
+    check!(
         Msg::decode_legacy(&buf) == Ok(m),
         "P-6: the legacy packet decodes to the message sent"
     );
     cover!(src, m.cmd_type == CmdType::Mtrs, "motor command");
+}
+
+/// Stand-ins under Kani (with `#[kani::stub(…)]`, which needs `cargo kani -Z stubbing`).
+#[cfg(kani)]
+pub(crate) mod model {
+    use super::*;
+    use statemachine::harness::{arbitrary, KaniSource};
+
+    /// The most motors an answer of [`uninterpreted_decode_robust`] carries angles for.
+    const ANGLES: usize = 4;
+    /// How many distinct frames it remembers: more than any harness decodes.
+    const REMEMBERED: usize = 2;
+
+    /// One answer, kept apart from the motor count (a static cannot be generic): a refusal or
+    /// the fields of a command.
+    #[derive(Clone, Copy)]
+    struct Answer {
+        refused: Option<RejectReason>,
+        cmd_type: CmdType,
+        words: [i32; 4],
+        angles: [i32; ANGLES],
+    }
+
+    /// What it has answered: (frame length, frame bytes, answer).
+    static mut ANSWERS: [Option<(usize, [u8; ROBUST_BUF], Answer)>; REMEMBERED] =
+        [None; REMEMBERED];
+
+    /// An uninterpreted function of the frame's bytes in place of `CmdMsg::decode_robust`: any
+    /// command or any refusal, but the same answer whenever it is asked again about the same bytes.
+    /// A property proven with it holds for every pure function of the bytes, and so for the real
+    /// decoder, which is one (no state). Remembers [`REMEMBERED`] frames of up to `ROBUST_BUF`
+    /// bytes; a harness that asks about more fails its assumption, and its covers show it.
+    #[allow(unsafe_code)]
+    pub(crate) fn uninterpreted_decode_robust<const N: usize>(
+        frame: &[u8],
+    ) -> Result<CmdMsg<N>, RejectReason> {
+        kani::assume(frame.len() <= ROBUST_BUF && N <= ANGLES);
+        // SAFETY: Kani runs a harness on one thread, from a fresh program state each time; no
+        // reference to the static outlives this call.
+        let answers = unsafe { &mut *core::ptr::addr_of_mut!(ANSWERS) };
+        // Plain loops of fixed lengths (the slots, the frame's bytes), which CBMC unrolls exactly.
+        let mut found = None;
+        for slot in answers.iter() {
+            if let Some((len, seen, answer)) = slot {
+                let same = *len == frame.len() && seen.iter().zip(frame).all(|(a, b)| a == b);
+                if found.is_none() && same {
+                    found = Some(*answer);
+                }
+            }
+        }
+        let answer = match found {
+            Some(a) => a,
+            None => {
+                let src = &mut KaniSource;
+                let a = Answer {
+                    refused: if kani::any() {
+                        Some(arbitrary::reason(src))
+                    } else {
+                        None
+                    },
+                    cmd_type: CmdType::from_raw(i32::from(src.below(5))).unwrap_or_default(),
+                    words: kani::any(),
+                    angles: kani::any(),
+                };
+                let mut bytes = [0u8; ROBUST_BUF];
+                for (dst, &b) in bytes.iter_mut().zip(frame) {
+                    *dst = b;
+                }
+                let mut stored = false;
+                for slot in answers.iter_mut() {
+                    if !stored && slot.is_none() {
+                        *slot = Some((frame.len(), bytes, a));
+                        stored = true;
+                    }
+                }
+                kani::assume(stored);
+                a
+            }
+        };
+        if let Some(reason) = answer.refused {
+            return Err(reason);
+        }
+        let mut mtr_angles = [0i32; N];
+        for (dst, &a) in mtr_angles.iter_mut().zip(&answer.angles) {
+            *dst = a;
+        }
+        let [is_relative, mtr_speed_deg_s, mtr_accel_deg_s_s, cmd_success] = answer.words;
+        Ok(CmdMsg {
+            cmd_type: answer.cmd_type,
+            is_relative,
+            mtr_angles,
+            mtr_speed_deg_s,
+            mtr_accel_deg_s_s,
+            cmd_success,
+        })
+    }
 }
 
 /// Kani harnesses (`cargo kani -p protocol -Z stubbing -Z function-contracts --harness teensy::`,
@@ -652,9 +765,11 @@ pub(crate) fn check_legacy_round_trip(src: &mut impl Source) {
 /// (`verify_body_round_trip`), one-block COBS (`verify_unstuff_inverts_stuff`) and the check bytes
 /// (`verify_check_bytes`). A flipped bit is refused in every frame of one motor
 /// (`verify_bit_flip_refused`: one frame, a symbolic bit, real CRC; the content does not matter).
-/// The whole-message harnesses `verify_stream_delivers_frame` and `verify_decode_total` are under
-/// `cfg_attr(kani_pending, …)`: they run only with `RUSTFLAGS="--cfg kani_pending" cargo kani`, and
-/// always as `cargo test` twins. See `proofs/REPORT.md`.
+/// The stream decoder delivers what `decode_robust` answers (`verify_stream_delivers_frame`: from
+/// the bytes `verify_robust_push_step`'s induction says a frame's non-zero bytes leave held, with
+/// `decode_robust` an uninterpreted function of the bytes). `check_decode_total` (both frame
+/// decoders and the stream decoder on the same bytes) and `check_round_trip` are twins only: each
+/// of their parts is proven above. See `proofs/REPORT.md`.
 #[cfg(kani)]
 #[allow(dead_code)]
 mod proofs {
@@ -745,21 +860,16 @@ mod proofs {
         check_robust_holds_back_no_frame(&mut KaniSource);
     }
 
-    // Pending. Version 1 of the frame ran out of memory (9–10 GB) on both with the
-    // field-sensitivity flag: each decodes a symbolic frame twice (the stream half a copy in the
-    // decoder's buffer and the original), with the real CRC. The stream half now takes the CRC as
-    // a pure function of the bytes (its property needs only that the same bytes give the same
-    // answer), which removes the CRC's table lookups. With it, run alone: still in symbolic
-    // execution after 12 min at 8.1 GB (the frame's copy in the decoder's buffer, unwound to 31).
-    #[cfg_attr(kani_pending, kani::proof)]
-    #[cfg_attr(kani_pending, kani::unwind(31))]
-    #[cfg_attr(
-        kani_pending,
-        kani::stub(
-            crate::crc16::checksum,
-            crate::crc16::verification::model::uninterpreted_checksum
-        )
-    )]
+    /// P-22 by composition: the stream decoder hands `decode_robust` exactly the frame's bytes
+    /// and returns its answer, whatever that answer is. `decode_robust` is an uninterpreted
+    /// function here ([`model::uninterpreted_decode_robust`]: any command or any refusal, the same
+    /// for the same bytes), so the property holds for every pure function of the bytes, the real
+    /// decoder among them; what the real one answers is `verify_robust_total`'s,
+    /// `verify_robust_round_trip`'s and `verify_bit_flip_refused`'s. (With the real decoder it was
+    /// still in symbolic execution after 12 min at 8.1 GB: two COBS passes over symbolic bytes.)
+    #[kani::proof]
+    #[kani::unwind(31)]
+    #[kani::stub(CmdMsg::decode_robust, model::uninterpreted_decode_robust)]
     fn verify_stream_delivers_frame() {
         check_stream_delivers_frame(&mut KaniSource);
     }
