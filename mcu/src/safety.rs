@@ -34,6 +34,10 @@ pub struct Safety<const N: usize = AXES> {
     ladder: Ladder<N>,
     ticks: u32,
     trace: Trace,
+    /// Under Kani only: the events the stand-in of [`Safety::apply`] recorded in place of the
+    /// ladder's steps (`verification::event_log`): the first two, then how many.
+    #[cfg(kani)]
+    pub(crate) seen: [u8; 3],
 }
 
 impl<const N: usize> Safety<N> {
@@ -43,6 +47,8 @@ impl<const N: usize> Safety<N> {
             ladder: Ladder::new(cfg),
             ticks: 0,
             trace: Trace::new(),
+            #[cfg(kani)]
+            seen: [0; 3],
         }
     }
 
@@ -53,6 +59,8 @@ impl<const N: usize> Safety<N> {
             ladder,
             ticks: 0,
             trace: Trace::new(),
+            #[cfg(kani)]
+            seen: [0; 3],
         }
     }
 

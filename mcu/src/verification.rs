@@ -321,6 +321,15 @@ pub fn pi_spi_shutdown_bit_brakes_in_its_transfer(src: &mut impl Source) {
 /// protocol crate's `verify_version_and_parity_first` — or any other reason) changes nothing but
 /// counters: no valid frame, no gain, no servo command, no update counter, and the drive stays
 /// what it was unless its shutdown bit stops the motors.
+///
+/// Under Kani by composition: `Safety::apply` records the events the application applies
+/// ([`event_log`]) instead of stepping the ladder, and the harness checks that a refused transfer
+/// applies exactly `Shutdown(true)` when its bit is set, then `Rejected` of its reason, and nothing
+/// else. What those events do to any valid ladder of four axes is the ladder's own proof
+/// (`verify_one_step_properties_4`, every profile): a refusal changes nothing applied, keeps the
+/// drive and validates nothing (INV-4), the shutdown bit brakes in its step (INV-7), an event
+/// without a frame validates nothing (INV-18), and the state after each stays valid (INV-0). The
+/// twin runs the whole body on the real ladder.
 pub fn pi_spi_refusal_changes_nothing(src: &mut impl Source) {
     use crate::pi_spi::{PiSpiApp, MOTORS, TUNING};
     use protocol::pi_spi::Shutdown;
@@ -340,6 +349,7 @@ pub fn pi_spi_refusal_changes_nothing(src: &mut impl Source) {
     let updates_before = *app.updates();
     let o = app.apply(&mut safety, raw, Err(reason));
     check!(!o.accepted, "a refused buffer is not accepted");
+    // (Under Kani the ladder is not stepped: this one and the drive's are the ladder's proofs.)
     check!(
         safety.ladder().counters().valid_frames == frames,
         "a refused buffer is no valid frame"
@@ -356,13 +366,39 @@ pub fn pi_spi_refusal_changes_nothing(src: &mut impl Source) {
         *app.updates() == updates_before,
         "a refused buffer takes no update flag"
     );
-    if raw.motors {
-        check!(o.out.drive == Drive::Brake, "its shutdown bit still brakes");
-    } else {
+    check!(
+        o.out == safety.output() && o.motors_off == (o.out.drive == Drive::Brake),
+        "the outcome reports the ladder's output"
+    );
+    #[cfg(kani)]
+    {
+        let want_first = if raw.motors {
+            event_log::code(&statemachine::Event::<MOTORS>::Shutdown(true))
+        } else {
+            event_log::code(&statemachine::Event::<MOTORS>::Rejected(reason))
+        };
+        let [first, second, count] = safety.seen;
         check!(
-            o.out.drive == before.drive,
-            "without the shutdown bit a refused buffer leaves the drive as it was"
+            count == 1 + u8::from(raw.motors),
+            "a refused buffer applies one event, two with its shutdown bit"
         );
+        check!(
+            first == want_first
+                && (!raw.motors
+                    || second == event_log::code(&statemachine::Event::<MOTORS>::Rejected(reason))),
+            "a refused buffer applies its shutdown bit if set, then the refusal of its reason"
+        );
+    }
+    #[cfg(not(kani))]
+    {
+        if raw.motors {
+            check!(o.out.drive == Drive::Brake, "its shutdown bit still brakes");
+        } else {
+            check!(
+                o.out.drive == before.drive,
+                "without the shutdown bit a refused buffer leaves the drive as it was"
+            );
+        }
     }
     cover!(src, before.mode != Mode::Brake, "refused while running");
     cover!(src, reason == RejectReason::Version, "wrong version");
@@ -673,6 +709,36 @@ pub fn odometry_update_finite(src: &mut impl Source) {
 /// `imu::verify_orientation_check_is_the_definition`), none takes the ladder, and none of their
 /// state is read by the property; the models return any result and so over-approximate them.
 /// (They also keep `libm`'s x86 inline assembly, which Kani does not model, out of that harness.)
+/// Stand-in for `Safety::apply` under Kani (`verify_pi_spi_refusal_changes_nothing`): records
+/// which event the application applied, in order, in the Kani-only field `Safety::seen`, and leaves
+/// the ladder as it was.
+#[cfg(kani)]
+#[allow(dead_code)]
+mod event_log {
+    use statemachine::Event;
+
+    /// An event as the refusal harness tells them apart: 1 and 2 the shutdown bit set and clear,
+    /// 16 + the reason's index a refusal, 255 any other event.
+    pub fn code<const N: usize>(e: &Event<N>) -> u8 {
+        match e {
+            Event::Shutdown(true) => 1,
+            Event::Shutdown(false) => 2,
+            Event::Rejected(r) => 16u8.saturating_add(r.index() as u8),
+            _ => 255,
+        }
+    }
+
+    pub fn record<const N: usize>(safety: &mut crate::Safety<N>, event: Event<N>) {
+        let [first, second, count] = &mut safety.seen;
+        match *count {
+            0 => *first = code(&event),
+            1 => *second = code(&event),
+            _ => {}
+        }
+        *count = count.saturating_add(1);
+    }
+}
+
 // Referenced only by the `kani::stub` attributes, which rustc does not count as uses.
 #[cfg(kani)]
 #[allow(dead_code)]
@@ -823,6 +889,7 @@ mod proofs {
 
     #[kani::proof]
     #[kani::unwind(17)]
+    #[kani::stub(crate::Safety::apply, super::event_log::record)]
     fn verify_pi_spi_refusal_changes_nothing() {
         super::pi_spi_refusal_changes_nothing(&mut KaniSource);
     }
