@@ -12,7 +12,7 @@
 set -euo pipefail
 cd "$(dirname "$0")/../.."
 cargo fw
-cargo build -p firmware --release --target thumbv7em-none-eabihf --features qemu --target-dir target/qemu
+cargo build -p firmware --profile firmware --target thumbv7em-none-eabihf --features qemu --target-dir target/qemu
 profiles=(amr-spi cdc teensy pi-spi)
 work="$(mktemp -d)"
 qpid=""
@@ -32,8 +32,8 @@ python3 firmware/qemu/pi_spi.py make-budget "$work/pi_spi_transfers.bin"
 for profile in "${profiles[@]}"; do
   out="$work/$profile"
   mkdir -p "$out"
-  board="$PWD/target/thumbv7em-none-eabihf/release/$profile"
-  emu="$PWD/target/qemu/thumbv7em-none-eabihf/release/$profile"
+  board="$PWD/target/thumbv7em-none-eabihf/firmware/$profile"
+  emu="$PWD/target/qemu/thumbv7em-none-eabihf/firmware/$profile"
   port=$((20000 + RANDOM % 20000))
   link=(-serial none)
   serial_env=()

@@ -12,6 +12,6 @@
 set -euo pipefail
 cd "$(dirname "$0")/../.."
 RUSTC_BOOTSTRAP=1 RUSTFLAGS="-Z emit-stack-sizes" \
-  cargo build -q -p firmware --release --target thumbv7em-none-eabihf --target-dir target/stack >&2
+  cargo build -q -p firmware --profile firmware --target thumbv7em-none-eabihf --target-dir target/stack >&2
 profile="${1:-amr-spi}"
-python3 firmware/budget/stack.py "target/stack/thumbv7em-none-eabihf/release/$profile" "$profile"
+python3 firmware/budget/stack.py "target/stack/thumbv7em-none-eabihf/firmware/$profile" "$profile"

@@ -6,8 +6,8 @@
 # Needs qemu-system-arm (Debian: apt-get install qemu-system-arm) and python3.
 set -euo pipefail
 cd "$(dirname "$0")/../.."
-cargo build -p firmware --release --target thumbv7em-none-eabihf --features qemu --target-dir target/qemu
-elf="$PWD/target/qemu/thumbv7em-none-eabihf/release/amr-spi"
+cargo build -p firmware --profile firmware --target thumbv7em-none-eabihf --features qemu --target-dir target/qemu
+elf="$PWD/target/qemu/thumbv7em-none-eabihf/firmware/amr-spi"
 work="$(mktemp -d)"
 trap 'rm -rf "$work"' EXIT
 python3 firmware/qemu/make_frames.py "$work/frames.bin"
@@ -23,7 +23,7 @@ cargo run -q --release -p motorlink -- info --capture "$work/feedback.bin"
 
 # The seed 004 image (`pi-spi`): its transfers from pi_spi_transfers.bin (packed with Python's struct
 # from the seed's declarations), its trace and the TxBuffers it queued checked by pi_spi.py.
-elf="$PWD/target/qemu/thumbv7em-none-eabihf/release/pi-spi"
+elf="$PWD/target/qemu/thumbv7em-none-eabihf/firmware/pi-spi"
 python3 firmware/qemu/pi_spi.py make "$work/pi_spi_transfers.bin"
 (cd "$work" && timeout 120 qemu-system-arm -machine netduinoplus2 -cpu cortex-m4 -nographic \
   -monitor none -serial none -semihosting-config enable=on,target=native -kernel "$elf") > "$work/pi_spi_trace.txt"

@@ -251,7 +251,8 @@ fn build(root: &Path, profile: &str) -> Result<(PathBuf, PathBuf), String> {
         "build",
         "-p",
         "firmware",
-        "--release",
+        "--profile",
+        "firmware",
         "--target",
         "thumbv7em-none-eabihf",
         "--features",
@@ -263,7 +264,7 @@ fn build(root: &Path, profile: &str) -> Result<(PathBuf, PathBuf), String> {
     ])?;
     status(&["build", "--release", "-p", "motorlink"])?;
     Ok((
-        root.join("target/qemu/thumbv7em-none-eabihf/release")
+        root.join("target/qemu/thumbv7em-none-eabihf/firmware")
             .join(profile),
         root.join("target/release/motorlink"),
     ))

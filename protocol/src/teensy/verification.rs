@@ -331,6 +331,12 @@ pub(crate) fn check_robust_total(src: &mut impl Source) {
         ),
         "P-4: decode_robust returns a message or one of its typed errors"
     );
+    if n != Msg::ROBUST_LEN || buf[..n].last() != Some(&0) {
+        check!(
+            r == Err(RejectReason::Framing),
+            "P-4: bytes of another length or not ending in 0x00 are a framing error"
+        );
+    }
     cover!(src, r.is_ok(), "robust decoded");
     cover!(src, r == Err(RejectReason::Crc), "robust crc error");
     cover!(src, r == Err(RejectReason::Framing), "robust framing error");
@@ -680,6 +686,57 @@ pub(crate) mod model {
         angles: [i32; ANGLES],
     }
 
+    /// The one body [`remembered_stuff_into`] has stuffed and the block it wrote for it.
+    static mut STUFFED_BODY: Option<([u8; BODY], [u8; STUFFED])> = None;
+
+    /// Stands for [`stuff_into`] on the one body of [`BODY`] bytes a round-trip harness stuffs: any
+    /// block of [`STUFFED`] non-zero bytes, remembered with the body. For that length this is what
+    /// `verify_unstuff_inverts_stuff` proves of the real encoder, whose block is one of these: it
+    /// returns `Some(STUFFED)`, writes `STUFFED` non-zero bytes and nothing past them, and
+    /// [`unstuff`] gives the body back from them. A harness that stuffs another length or a second
+    /// body fails the assumption, and its covers show it.
+    #[allow(unsafe_code)]
+    pub(crate) fn remembered_stuff_into(body: &[u8], out: &mut [u8]) -> Option<usize> {
+        // SAFETY: Kani runs a harness on one thread, from a fresh program state each time; no
+        // reference to the static outlives this call.
+        let slot = unsafe { &mut *core::ptr::addr_of_mut!(STUFFED_BODY) };
+        kani::assume(slot.is_none());
+        let body: &[u8; BODY] = body.try_into().ok()?;
+        let block = out.get_mut(..STUFFED)?;
+        let stuffed: [u8; STUFFED] = kani::any();
+        for (o, &s) in block.iter_mut().zip(&stuffed) {
+            kani::assume(s != 0);
+            *o = s;
+        }
+        *slot = Some((*body, stuffed));
+        Some(STUFFED)
+    }
+
+    /// Stands for [`unstuff`] beside [`remembered_stuff_into`]: the block it wrote gives back the
+    /// body it was given (`verify_unstuff_inverts_stuff`); any other bytes give anything the real
+    /// decoder could (`None`, or the block's data length with any bytes written).
+    #[allow(unsafe_code)]
+    pub(crate) fn remembered_unstuff(stuffed: &[u8], out: &mut [u8]) -> Option<usize> {
+        // SAFETY: as in `remembered_stuff_into`.
+        let slot = unsafe { &*core::ptr::addr_of!(STUFFED_BODY) };
+        if let Some((body, block)) = slot {
+            if stuffed == block.as_slice() && out.len() >= BODY {
+                for (o, &b) in out.iter_mut().zip(body) {
+                    *o = b;
+                }
+                return Some(BODY);
+            }
+        }
+        let data = stuffed.len().checked_sub(1)?;
+        for o in out.iter_mut().take(data) {
+            *o = kani::any();
+        }
+        if kani::any() || out.len() < data {
+            return None;
+        }
+        Some(data)
+    }
+
     /// What it has answered: (frame length, frame bytes, answer).
     static mut ANSWERS: [Option<(usize, [u8; ROBUST_BUF], Answer)>; REMEMBERED] =
         [None; REMEMBERED];
@@ -812,13 +869,17 @@ mod proofs {
     }
 
     /// The whole robust round trip of one motor, the CRC an uninterpreted function of the bytes
-    /// (sound for a round trip: see [`check_robust_round_trip`]).
+    /// (sound for a round trip: see [`check_robust_round_trip`]) and COBS the pair of stand-ins of
+    /// what `verify_unstuff_inverts_stuff` proves of it (`model::remembered_stuff_into`): what is
+    /// left to prove is that `encode_robust` and `decode_robust` put the pieces together.
     #[kani::proof]
     #[kani::unwind(31)]
     #[kani::stub(
         crate::crc16::checksum,
         crate::crc16::verification::model::uninterpreted_checksum
     )]
+    #[kani::stub(crate::teensy::stuff_into, model::remembered_stuff_into)]
+    #[kani::stub(crate::teensy::unstuff, model::remembered_unstuff)]
     fn verify_robust_round_trip() {
         check_robust_round_trip(&mut KaniSource);
     }
