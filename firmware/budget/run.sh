@@ -12,7 +12,7 @@
 set -euo pipefail
 cd "$(dirname "$0")/../.."
 cargo fw
-cargo build -p firmware --profile firmware --target thumbv7em-none-eabihf --features qemu --target-dir target/qemu
+cargo xtask fw-variant qemu
 profiles=(amr-spi cdc teensy pi-spi)
 work="$(mktemp -d)"
 qpid=""

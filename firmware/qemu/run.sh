@@ -6,7 +6,7 @@
 # Needs qemu-system-arm (Debian: apt-get install qemu-system-arm) and python3.
 set -euo pipefail
 cd "$(dirname "$0")/../.."
-cargo build -p firmware --profile firmware --target thumbv7em-none-eabihf --features qemu --target-dir target/qemu
+cargo xtask fw-variant qemu
 elf="$PWD/target/qemu/thumbv7em-none-eabihf/firmware/amr-spi"
 work="$(mktemp -d)"
 trap 'rm -rf "$work"' EXIT

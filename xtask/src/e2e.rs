@@ -247,27 +247,9 @@ fn build(root: &Path, profile: &str) -> Result<(PathBuf, PathBuf), String> {
             .then_some(())
             .ok_or_else(|| format!("cargo {} failed", args.join(" ")))
     };
-    status(&[
-        "build",
-        "-p",
-        "firmware",
-        "--profile",
-        "firmware",
-        "--target",
-        "thumbv7em-none-eabihf",
-        "--features",
-        "qemu",
-        "--target-dir",
-        "target/qemu",
-        "--bin",
-        profile,
-    ])?;
+    let images = crate::variant::build(root, "qemu")?;
     status(&["build", "--release", "-p", "motorlink"])?;
-    Ok((
-        root.join("target/qemu/thumbv7em-none-eabihf/firmware")
-            .join(profile),
-        root.join("target/release/motorlink"),
-    ))
+    Ok((images.join(profile), root.join("target/release/motorlink")))
 }
 
 /// Runs the end-to-end session of `profile` and returns a summary.

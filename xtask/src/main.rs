@@ -27,6 +27,7 @@ mod fuzz;
 mod ros_e2e;
 mod rta;
 mod trace;
+mod variant;
 
 use std::fmt::Write as _;
 use std::path::Path;
@@ -338,6 +339,21 @@ fn main() -> ExitCode {
             }
         }
         ["rta", rest @ ..] => rta_main(rest),
+        ["fw-variant", variant] => {
+            let root = Path::new(env!("CARGO_MANIFEST_DIR"))
+                .parent()
+                .unwrap_or(Path::new("."));
+            match variant::build(root, variant) {
+                Ok(dir) => {
+                    println!("{variant} images in {}", dir.display());
+                    ExitCode::SUCCESS
+                }
+                Err(e) => {
+                    eprintln!("xtask fw-variant: FAILED: {e}");
+                    ExitCode::FAILURE
+                }
+            }
+        }
         ["qemu-e2e", profile] => {
             let root = Path::new(env!("CARGO_MANIFEST_DIR"))
                 .parent()
@@ -389,7 +405,8 @@ fn main() -> ExitCode {
         }
         _ => {
             eprintln!(
-                "usage: cargo xtask kani-table <dir of `--output-into-files` results>\n       cargo xtask kani-table --write <dir>…  (rewrites proofs/REPORT.md's generated tables)\n       cargo xtask trace\n       cargo xtask rta [--check [FILE] | --write [FILE]]\n       cargo xtask qemu-e2e <cdc|teensy>\n       cargo xtask ros-e2e\n       {}",
+                "usage: cargo xtask kani-table <dir of `--output-into-files` results>\n       cargo xtask kani-table --write <dir>…  (rewrites proofs/REPORT.md's generated tables)\n       cargo xtask trace\n       cargo xtask rta [--check [FILE] | --write [FILE]]\n       cargo xtask qemu-e2e <cdc|teensy>\n       {}\n       cargo xtask ros-e2e\n       {}",
+                variant::USAGE,
                 fuzz::USAGE
             );
             ExitCode::FAILURE
