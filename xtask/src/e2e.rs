@@ -1,6 +1,6 @@
 //! `cargo xtask qemu-e2e <cdc|teensy>`: the real host against the real firmware. Boots the
 //! profile's emulator image (`--features qemu`) in QEMU `netduinoplus2` with USART1 on a pty, drives
-//! it with the release `motorlink` binary over that pty (one process per step, as a user would),
+//! it with the `motorlink` binary (the dev build) over that pty (one process per step, as a user would),
 //! and checks every step against the firmware's own trace (`firmware/src/board/trace.rs`: one
 //! line per tick on which something but the age changed, ticks in emulated milliseconds).
 //!
@@ -248,8 +248,9 @@ fn build(root: &Path, profile: &str) -> Result<(PathBuf, PathBuf), String> {
             .ok_or_else(|| format!("cargo {} failed", args.join(" ")))
     };
     let images = crate::variant::build(root, "qemu")?;
-    status(&["build", "--release", "-p", "motorlink"])?;
-    Ok((images.join(profile), root.join("target/release/motorlink")))
+    // The dev build, which `cargo test` has built already (the release build is the same code).
+    status(&["build", "-p", "motorlink"])?;
+    Ok((images.join(profile), root.join("target/debug/motorlink")))
 }
 
 /// Runs the end-to-end session of `profile` and returns a summary.
@@ -338,10 +339,11 @@ fn cdc(q: &Qemu, ml: &Path) -> Result<String, String> {
         ],
     )?;
     expect(r.ok, "2 s of SET_MOTOR_PWM at 50 Hz sent, STATUS received")?;
-    let t = q.trace();
-    expect(
-        t.iter().any(|l| !l.brake && l.out == CDC_OUT),
+    // The trace is read from QEMU by a thread of its own: the line may still be on its way.
+    q.wait_for(
         &format!("SET_MOTOR_PWM {CDC_PWM} reached the outputs as {CDC_OUT:?}"),
+        10,
+        |t| t.iter().any(|l| !l.brake && l.out == CDC_OUT),
     )?;
     // 3. Right after the drive, while the board still runs on its last frame: a corrupted frame
     // (a SET_MOTOR_PWM of -900 on every motor, one payload bit flipped) is refused and changes
@@ -529,10 +531,11 @@ fn teensy(q: &Qemu, ml: &Path) -> Result<String, String> {
         ],
     )?;
     expect(r.ok, "CAL and MTRS echoed with cmd_success 1")?;
-    let t = q.trace();
-    expect(
-        t.iter().any(|l| !l.brake && l.out == want),
+    // The trace is read from QEMU by a thread of its own: the line may still be on its way.
+    q.wait_for(
         &format!("MTRS 30,-45,90,0 reached the step targets as {want:?}"),
+        10,
+        |t| t.iter().any(|l| !l.brake && l.out == want),
     )?;
     // A corrupted frame right after: refused, never applied (the joints stay where they are).
     let before = last(q).ok_or("no trace line")?;
