@@ -187,9 +187,7 @@ fn kani_write(root: &Path, dirs: &[&str]) -> Result<(), String> {
 /// `--check` also fails when FILE's (default `proofs/SAFETY.md`) generated section differs from it,
 /// `--write` regenerates that section.
 fn rta_main(args: &[&str]) -> ExitCode {
-    let root = Path::new(env!("CARGO_MANIFEST_DIR"))
-        .parent()
-        .unwrap_or(Path::new("."));
+    let root = workspace_root();
     let (mode, file) = match args {
         [] => ("print", None),
         ["--check"] | ["--write"] => (args.first().copied().unwrap_or(""), None),
@@ -268,6 +266,13 @@ fn rta_main(args: &[&str]) -> ExitCode {
     }
 }
 
+/// The workspace's root directory (the parent of this crate's).
+fn workspace_root() -> &'static Path {
+    Path::new(env!("CARGO_MANIFEST_DIR"))
+        .parent()
+        .unwrap_or(Path::new("."))
+}
+
 fn main() -> ExitCode {
     let args: Vec<String> = std::env::args().skip(1).collect();
     match args
@@ -277,9 +282,7 @@ fn main() -> ExitCode {
         .as_slice()
     {
         ["kani-table", "--write", dirs @ ..] if !dirs.is_empty() => {
-            let root = Path::new(env!("CARGO_MANIFEST_DIR"))
-                .parent()
-                .unwrap_or(Path::new("."));
+            let root = workspace_root();
             match kani_write(root, dirs) {
                 Ok(()) => {
                     println!("xtask kani-table: proofs/REPORT.md's generated tables rewritten");
@@ -302,9 +305,7 @@ fn main() -> ExitCode {
             }
         },
         ["trace"] => {
-            let root = Path::new(env!("CARGO_MANIFEST_DIR"))
-                .parent()
-                .unwrap_or(Path::new("."));
+            let root = workspace_root();
             match trace::run(root) {
                 Ok(problems) if problems.is_empty() => {
                     println!("xtask trace: SAFETY.md, REPORT.md and the harness code agree");
@@ -324,9 +325,7 @@ fn main() -> ExitCode {
             }
         }
         ["ros-e2e"] => {
-            let root = Path::new(env!("CARGO_MANIFEST_DIR"))
-                .parent()
-                .unwrap_or(Path::new("."));
+            let root = workspace_root();
             match ros_e2e::run(root) {
                 Ok(summary) => {
                     println!("{summary}");
@@ -340,9 +339,7 @@ fn main() -> ExitCode {
         }
         ["rta", rest @ ..] => rta_main(rest),
         ["fw-variant", variant] => {
-            let root = Path::new(env!("CARGO_MANIFEST_DIR"))
-                .parent()
-                .unwrap_or(Path::new("."));
+            let root = workspace_root();
             match variant::build(root, variant) {
                 Ok(dir) => {
                     println!("{variant} images in {}", dir.display());
@@ -355,9 +352,7 @@ fn main() -> ExitCode {
             }
         }
         ["qemu-e2e", profile] => {
-            let root = Path::new(env!("CARGO_MANIFEST_DIR"))
-                .parent()
-                .unwrap_or(Path::new("."));
+            let root = workspace_root();
             match e2e::run(root, profile) {
                 Ok(summary) => {
                     println!("{summary}");
@@ -384,9 +379,7 @@ fn main() -> ExitCode {
                     return ExitCode::from(64);
                 }
             };
-            let root = Path::new(env!("CARGO_MANIFEST_DIR"))
-                .parent()
-                .unwrap_or(Path::new("."));
+            let root = workspace_root();
             match fuzz::run(root, &opts) {
                 Ok((table, ok)) => {
                     print!("{table}");
