@@ -700,7 +700,7 @@ pub(crate) mod model {
         // SAFETY: Kani runs a harness on one thread, from a fresh program state each time; no
         // reference to the static outlives this call.
         let slot = unsafe { &mut *core::ptr::addr_of_mut!(STUFFED_BODY) };
-        kani::assume(slot.is_none());
+        kani::assume(slot.is_none() && body.len() == BODY);
         let body: &[u8; BODY] = body.try_into().ok()?;
         let block = out.get_mut(..STUFFED)?;
         let stuffed: [u8; STUFFED] = kani::any();
