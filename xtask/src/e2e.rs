@@ -236,21 +236,8 @@ fn expect(cond: bool, what: &str) -> Result<(), String> {
 }
 
 fn build(root: &Path, profile: &str) -> Result<(PathBuf, PathBuf), String> {
-    let cargo = std::env::var("CARGO").unwrap_or_else(|_| "cargo".into());
-    let status = |args: &[&str]| -> Result<(), String> {
-        let s = Command::new(&cargo)
-            .args(args)
-            .current_dir(root)
-            .status()
-            .map_err(|e| e.to_string())?;
-        s.success()
-            .then_some(())
-            .ok_or_else(|| format!("cargo {} failed", args.join(" ")))
-    };
     let images = crate::variant::build(root, "qemu")?;
-    // The dev build, which `cargo test` has built already (the release build is the same code).
-    status(&["build", "-p", "motorlink"])?;
-    Ok((images.join(profile), root.join("target/debug/motorlink")))
+    Ok((images.join(profile), crate::cargo::motorlink(root)?))
 }
 
 /// Runs the end-to-end session of `profile` and returns a summary.

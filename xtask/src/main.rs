@@ -22,6 +22,7 @@
 //! its own (see `ros_e2e`).
 #![forbid(unsafe_code)]
 
+mod cargo;
 mod e2e;
 mod fuzz;
 mod ros_e2e;

@@ -124,16 +124,7 @@ pub fn run(root_dir: &Path) -> Result<String, String> {
     if std::env::var("MOTORLINK_ROS_E2E_SKIP").is_ok_and(|v| v == "1") {
         return Ok("ros-e2e skipped (MOTORLINK_ROS_E2E_SKIP=1)".into());
     }
-    let cargo = std::env::var("CARGO").unwrap_or_else(|_| "cargo".into());
-    let s = Command::new(&cargo)
-        .args(["build", "-p", "motorlink"])
-        .current_dir(root_dir)
-        .status()
-        .map_err(|e| format!("cannot run cargo: {e}"))?;
-    if !s.success() {
-        return Err("cargo build -p motorlink failed".into());
-    }
-    let ml: PathBuf = root_dir.join("target/debug/motorlink");
+    let ml: PathBuf = crate::cargo::motorlink(root_dir)?;
     let script = root_dir.join("host/tests/ros/cmd_vel_odom.py");
     let python =
         output("sh", &["-c", "command -v python3"]).map_err(|_| "python3 not found".to_string())?;

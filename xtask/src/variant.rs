@@ -11,7 +11,6 @@
 //! 85 s for `usb`, in a fresh clone).
 
 use std::path::{Path, PathBuf};
-use std::process::Command;
 
 /// The command line, for usage messages.
 pub const USAGE: &str = "cargo xtask fw-variant <qemu|usb>";
@@ -27,7 +26,6 @@ fn images(variant: &str) -> Option<&'static [&'static str]> {
 
 /// Runs `cargo build -p firmware --profile firmware --target thumbv7em-none-eabihf` with `extra`.
 fn build_firmware(root: &Path, extra: &[&str]) -> Result<(), String> {
-    let cargo = std::env::var("CARGO").unwrap_or_else(|_| "cargo".into());
     let mut args = vec![
         "build",
         "-p",
@@ -38,15 +36,7 @@ fn build_firmware(root: &Path, extra: &[&str]) -> Result<(), String> {
         "thumbv7em-none-eabihf",
     ];
     args.extend_from_slice(extra);
-    let status = Command::new(&cargo)
-        .args(&args)
-        .current_dir(root)
-        .status()
-        .map_err(|e| format!("cannot run cargo: {e}"))?;
-    status
-        .success()
-        .then_some(())
-        .ok_or_else(|| format!("cargo {} failed", args.join(" ")))
+    crate::cargo::cargo(root, &args)
 }
 
 /// Builds `variant`'s images, copies them to `target/<variant>/thumbv7em-none-eabihf/firmware/`
