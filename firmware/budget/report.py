@@ -52,6 +52,12 @@ BODIES = [
 ]
 
 
+def inclusive(incl, name):
+    """A function's figure in an `inclusive` profile, whatever its generic arguments
+    (`mcu::safety::Safety<2>::step<2>` for `mcu::safety::Safety::step`)."""
+    return sum(k for fn, k in incl.items() if short(fn) == name)
+
+
 def short(name):
     """A function name without its generic arguments (`any<u8, …>` → `any`)."""
     out, depth = [], 0
@@ -305,9 +311,9 @@ def amr_spi(out, img):
     if rec:
         incl = rec.get("inclusive", {})
         total = max(rec["instructions"])
-        apply_ = incl.get("mcu::link::LinkTask::apply", 0)
-        step = incl.get("mcu::safety::Safety::step", 0)
-        record = incl.get("mcu::safety::Safety::record", 0)
+        apply_ = inclusive(incl, "mcu::link::LinkTask::apply")
+        step = inclusive(incl, "mcu::safety::Safety::step")
+        record = inclusive(incl, "mcu::safety::Safety::record")
         out.append(f"{RECEIVE}, by stage: {total} = {total - apply_} CRC, protobuf decode and field")
         out.append(f"conversion (`decode_command`, with `receive`'s own entry and exit) + {apply_ - step}")
         out.append(f"`LinkTask::apply` (event, sequence, identity request) + {step - record} `Safety::step`")
@@ -714,12 +720,15 @@ def pi_spi(out, img):
         gains = incl.get("mcu::pi_spi::gains_from_wire", 0)
         orient = incl.get("mcu::imu::ImuFusion::set_orientation", 0)
         kin = incl.get("mcu::odometry::Odometry::configure", 0)
-        out.append(f"The worst sampled transfer by stage: {total} = {total - apply_} the version, parity and "
-                   f"decode of the 179 bytes (with `on_transfer`'s own entry and exit) + {take - upd} the "
-                   f"servo check and the ladder's two events + **{upd} the one-shot updates** (both gain "
-                   f"sets {gains}, the orientation {orient}, the kinematics {kin}) + {fb} the next TxBuffer "
-                   f"+ {apply_ - take - fb} the shutdown bits and the outcome. A transfer without update "
-                   f"flags costs about {total - upd} (not sampled separately).")
+        # `on_transfer` decodes, then calls `apply` (the shutdown bits, `take`, the outcome), then
+        # writes the next TxBuffer (`write_feedback`) after it.
+        out.append(f"The worst sampled transfer by stage: {total} = {total - apply_ - fb} the version, parity "
+                   f"and decode of the 179 bytes (with `on_transfer`'s own entry and exit) + {apply_ - take} "
+                   f"the shutdown bits and the outcome (`apply` besides `take`) + {take - upd} the servo "
+                   f"check and the ladder's two events + **{upd} the one-shot updates** (both gain sets "
+                   f"{gains}, the orientation {orient}, the kinematics {kin}) + {fb} the next TxBuffer "
+                   f"(`write_feedback`, after `apply`). A transfer without update flags costs about "
+                   f"{total - upd} (not sampled separately).")
     if tick:
         t = tick[1]
         odo = t.get("inclusive", {}).get(PI_ODOMETRY, 0)
