@@ -38,18 +38,17 @@
 use std::collections::{BTreeMap, BTreeSet};
 use std::path::Path;
 
-/// The files holding Kani harnesses, relative to the workspace root.
-pub const VERIFICATION_FILES: &[&str] = &[
-    "statemachine/src/verification.rs",
-    "control/src/verification.rs",
-    "mcu/src/verification.rs",
-    "mcu/src/imu/verification.rs",
-    "proofs/src/lib.rs",
-    "protocol/src/amr/verification.rs",
-    "protocol/src/cdc/verification.rs",
-    "protocol/src/crc16/verification.rs",
-    "protocol/src/pi_spi/verification.rs",
-    "protocol/src/teensy/verification.rs",
+/// The crates whose sources are read: every file among them that holds a `#[kani::proof]` is a
+/// verification file (found, not listed, so a new file of harnesses cannot go unchecked).
+const CRATES: &[&str] = &[
+    "statemachine",
+    "protocol",
+    "control",
+    "mcu",
+    "proofs",
+    "sim",
+    "host",
+    "firmware",
 ];
 
 /// The file whose bodies are instantiated per axis count (`verify_<body>_2`, `_4`).
@@ -1166,43 +1165,40 @@ fn short(row: &str) -> String {
 /// Files as (path relative to the workspace root, contents).
 pub type Files = Vec<(String, String)>;
 
-/// Reads the verification files, and the function names of every Rust source of the crates.
+/// Reads the verification files (every source of the crates holding a `#[kani::proof]`), and
+/// the function names of every Rust source of the crates.
 pub fn read_sources(root: &Path) -> Result<(Files, BTreeSet<String>), String> {
     let mut files = Vec::new();
-    for f in VERIFICATION_FILES {
-        let p = root.join(f);
-        let text = std::fs::read_to_string(&p).map_err(|e| format!("{}: {e}", p.display()))?;
-        files.push(((*f).to_string(), text));
-    }
     let mut others = BTreeSet::new();
-    for krate in [
-        "statemachine",
-        "protocol",
-        "control",
-        "mcu",
-        "proofs",
-        "sim",
-        "host",
-        "firmware",
-    ] {
+    for krate in CRATES {
         for sub in ["src", "tests", "examples"] {
-            collect_fns(&root.join(krate).join(sub), &mut others)?;
+            collect(root, &root.join(krate).join(sub), &mut files, &mut others)?;
         }
     }
+    files.sort();
     Ok((files, others))
 }
 
-fn collect_fns(dir: &Path, out: &mut BTreeSet<String>) -> Result<(), String> {
+fn collect(
+    root: &Path,
+    dir: &Path,
+    files: &mut Files,
+    out: &mut BTreeSet<String>,
+) -> Result<(), String> {
     let Ok(entries) = std::fs::read_dir(dir) else {
         return Ok(());
     };
     for e in entries {
         let p = e.map_err(|e| e.to_string())?.path();
         if p.is_dir() {
-            collect_fns(&p, out)?;
+            collect(root, &p, files, out)?;
         } else if p.extension().is_some_and(|x| x == "rs") {
             let text = std::fs::read_to_string(&p).map_err(|e| format!("{}: {e}", p.display()))?;
             out.extend(fn_names(&text));
+            if text.contains("#[kani::proof]") {
+                let rel = p.strip_prefix(root).unwrap_or(&p);
+                files.push((rel.to_string_lossy().replace('\\', "/"), text));
+            }
         }
     }
     Ok(())
@@ -1342,6 +1338,32 @@ Not in this run: `verify_round_trip_ping`, `verify_round_trip_ack`.
             got.iter().any(|p| p == wanted),
             "expected {wanted:?}, got {got:#?}"
         );
+    }
+
+    #[test]
+    #[allow(clippy::expect_used)]
+    fn every_file_with_a_harness_is_read() {
+        let root = std::env::temp_dir().join(format!("xtask-trace-{}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&root);
+        let put = |rel: &str, text: &str| {
+            let p = root.join(rel);
+            std::fs::create_dir_all(p.parent().expect("a parent")).expect("temp dir");
+            std::fs::write(p, text).expect("temp file");
+        };
+        put(
+            "mcu/src/deep/new_place.rs",
+            "#[kani::proof]\nfn verify_a() {}\n",
+        );
+        put("mcu/src/plain.rs", "fn helper() {}\n");
+        put(
+            "xtask/src/lib.rs",
+            "#[kani::proof]\nfn verify_outside() {}\n",
+        );
+        let (files, names) = read_sources(&root).expect("readable");
+        let _ = std::fs::remove_dir_all(&root);
+        let paths: Vec<&str> = files.iter().map(|(p, _)| p.as_str()).collect();
+        assert_eq!(paths, ["mcu/src/deep/new_place.rs"]);
+        assert!(names.contains("helper") && names.contains("verify_a"));
     }
 
     #[test]
