@@ -241,19 +241,28 @@ fn add_clamped(s: &mut Sum, x: f32) -> bool {
     }
 }
 
-/// Brings the heading sum back into (−π, π] after a step of at most π: one 2π, in two parts.
+/// Brings the heading sum back into (−π, π] after a step of at most π: one 2π, in two parts, and
+/// a second if the first left it outside (the rounding's margin).
 fn wrap_heading(h: &mut Sum) {
-    for _ in 0..2 {
-        let v = h.value();
-        if v > PI {
-            h.add(-TAU);
-            h.add(-TAU_LO);
-        } else if v <= -PI {
-            h.add(TAU);
-            h.add(TAU_LO);
-        } else {
-            return;
-        }
+    if wrap_once(h) {
+        wrap_once(h);
+    }
+}
+
+/// Moves the heading sum by one 2π (in two parts) toward (−π, π] if its value is outside; whether
+/// it was.
+fn wrap_once(h: &mut Sum) -> bool {
+    let v = h.value();
+    if v > PI {
+        h.add(-TAU);
+        h.add(-TAU_LO);
+        true
+    } else if v <= -PI {
+        h.add(TAU);
+        h.add(TAU_LO);
+        true
+    } else {
+        false
     }
 }
 
@@ -338,6 +347,11 @@ impl Odometry {
             self.counters.refused_dt = self.counters.refused_dt.saturating_add(1);
             return self.data();
         }
+        self.integrate(counts, dt_s)
+    }
+
+    /// [`Odometry::update`] of an accepted period (`dt_s` finite and at least [`MIN_DT_S`]).
+    fn integrate(&mut self, counts: [i32; 4], dt_s: f32) -> OdometryData {
         let Some(k) = self.config else {
             return self.data();
         };
@@ -420,3 +434,6 @@ impl Odometry {
 
 #[cfg(test)]
 mod tests;
+
+#[cfg(any(test, kani))]
+mod verification;

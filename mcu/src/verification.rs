@@ -790,38 +790,18 @@ mod update_models {
     }
 }
 
-/// Stand-ins for `libm`'s trigonometry under Kani: each returns any value in the real function's
-/// range (NaN where the real one returns NaN), which `mcu/tests/libm_ranges.rs` checks for every
-/// f32 argument, so a property proven with them holds for the real functions.
+/// Stand-in for `libm::sinf` under Kani (the odometry's arc factors,
+/// `odometry::verification::verify_arc_factors_bounded`): any value in the real function's range,
+/// NaN where the real one returns NaN; `mcu/tests/libm_ranges.rs` checks that range for every f32
+/// argument, so a property proven with it holds for the real function.
 #[cfg(kani)]
-mod libm_models {
-    use core::f32::consts::PI;
-
-    fn any_within(bound: f32) -> f32 {
-        let v: f32 = kani::any();
-        kani::assume(v >= -bound && v <= bound);
-        v
-    }
-
+pub(crate) mod libm_models {
     /// `libm::sinf`: in [−1, 1] for a finite argument, NaN otherwise.
     pub fn sinf(x: f32) -> f32 {
         if x.is_finite() {
-            any_within(1.0)
-        } else {
-            f32::NAN
-        }
-    }
-
-    /// `libm::cosf`: in [−1, 1] for a finite argument, NaN otherwise.
-    pub fn cosf(x: f32) -> f32 {
-        sinf(x)
-    }
-
-    /// `libm::remainderf(x, 2π)`: in [−π, π] for a finite `x`, NaN otherwise. The odometry calls
-    /// it with the divisor `TAU` only, the one divisor the range test checks.
-    pub fn remainderf(x: f32, _y: f32) -> f32 {
-        if x.is_finite() {
-            any_within(PI)
+            let v: f32 = kani::any();
+            kani::assume((-1.0..=1.0).contains(&v));
+            v
         } else {
             f32::NAN
         }
@@ -904,26 +884,6 @@ mod proofs {
     #[kani::unwind(17)]
     fn verify_odometry_configure_guarded() {
         super::odometry_configure_guarded(&mut KaniSource);
-    }
-
-    /// The update with `libm::sinf`, `cosf` and `remainderf` replaced by their ranges
-    /// (`libm_models`): any value in [−1, 1] for a finite argument, any value in [−π, π] for a
-    /// finite remainder by 2π, NaN otherwise. That over-approximates the real functions, whose
-    /// ranges the test `mcu/tests/libm_ranges.rs` checks for every one of the 2³² f32 arguments;
-    /// without the stand-ins their argument reduction (f64 arithmetic, a multi-word loop for large
-    /// arguments) is bit-blasted. Pending all the same: with the stand-ins, two updates of 16
-    /// symbolic f32 (the matrix product, the arc factors, the compensated sums) had not finished
-    /// after 14 min (0.9 GB); the twin runs.
-    #[cfg_attr(kani_pending, kani::proof)]
-    #[cfg_attr(kani_pending, kani::unwind(17))]
-    #[cfg_attr(kani_pending, kani::stub(libm::sinf, super::libm_models::sinf))]
-    #[cfg_attr(kani_pending, kani::stub(libm::cosf, super::libm_models::cosf))]
-    #[cfg_attr(
-        kani_pending,
-        kani::stub(libm::remainderf, super::libm_models::remainderf)
-    )]
-    fn verify_odometry_update_finite() {
-        super::odometry_update_finite(&mut KaniSource);
     }
 }
 

@@ -1,7 +1,8 @@
 //! The ranges of `libm`'s `sinf`, `cosf` and `remainderf(·, 2π)` for every one of the 2³² f32
-//! arguments: the premise of the Kani stand-ins in `mcu/src/verification.rs` (`libm_models`),
-//! which let `verify_odometry_update_finite` prove the odometry update without bit-blasting the
-//! functions themselves. Exhaustive, so ignored in the test run: `cargo test --profile ranges -p mcu
+//! arguments: the premise of the Kani stand-in for `sinf` in `mcu/src/verification.rs`
+//! (`libm_models`), which lets `verify_arc_factors_bounded` prove the arc factors without
+//! bit-blasting the function, and of the odometry update's decomposition (`proofs/REPORT.md`, "P-19
+//! by decomposition"), which takes the ranges of `cosf` and `remainderf` from here. Exhaustive, so ignored in the test run: `cargo test --profile ranges -p mcu
 //! --test libm_ranges -- --ignored` runs them (5 min 46 s on 2 cores, 11 min of CPU time).
 //!
 //! What they check is a property of `libm`'s source alone, and `Cargo.lock` pins that source by its
