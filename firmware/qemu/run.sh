@@ -18,8 +18,13 @@ python3 firmware/qemu/make_frames.py "$work/frames.bin"
 cp "$work/trace.txt" target/qemu/trace.txt
 cp "$work/feedback.bin" target/qemu/feedback.bin
 python3 firmware/qemu/check_trace.py "$work/trace.txt" "$work/feedback.bin" "$work/frames.bin" "$(git rev-parse HEAD 2>/dev/null || true)"
-# The host tool decodes the identity and reset cause from the bytes the firmware wrote.
-cargo run -q -p motorlink -- info --capture "$work/feedback.bin"
+# The host tool decodes the identity and reset cause from the bytes the firmware wrote (the binary
+# named by MOTORLINK if set, as .ci/run sets it to the one `cargo test` built; else cargo builds it).
+if [ -n "${MOTORLINK:-}" ]; then
+  "$MOTORLINK" info --capture "$work/feedback.bin"
+else
+  cargo run -q -p motorlink -- info --capture "$work/feedback.bin"
+fi
 
 # The seed 004 image (`pi-spi`): its transfers from pi_spi_transfers.bin (packed with Python's struct
 # from the seed's declarations), its trace and the TxBuffers it queued checked by pi_spi.py.

@@ -18,9 +18,22 @@ pub fn cargo(root: &Path, args: &[&str]) -> Result<(), String> {
         .ok_or_else(|| format!("cargo {} failed", args.join(" ")))
 }
 
-/// Builds `motorlink` and returns its path: the dev build, which `cargo test` has built already
-/// (the release build is the same code).
+/// The `motorlink` binary to drive: the one the environment variable `MOTORLINK` names if it is
+/// set (`.ci/run` names the one `cargo test` built, whose dependencies' features are unified with
+/// the tests', so that `cargo build -p motorlink` would rebuild them), else the dev build, built
+/// here (the release build is the same code).
 pub fn motorlink(root: &Path) -> Result<PathBuf, String> {
+    if let Some(named) = std::env::var_os("MOTORLINK") {
+        let path = root.join(named);
+        return if path.is_file() {
+            Ok(path)
+        } else {
+            Err(format!(
+                "MOTORLINK names {}, which is not a file",
+                path.display()
+            ))
+        };
+    }
     cargo(root, &["build", "-p", "motorlink"])?;
     Ok(root.join("target/debug/motorlink"))
 }

@@ -118,8 +118,8 @@ pub fn check_argv(user: Option<&str>, env: &[String], cmd: &[&str]) -> Vec<Strin
     argv
 }
 
-/// Builds motorlink (the dev build, which `cargo test` has built already), runs the Python check
-/// in the namespace; the summary or why it failed.
+/// Takes motorlink (`crate::cargo::motorlink`: the one `MOTORLINK` names, else the dev build), runs
+/// the Python check in the namespace; the summary or why it failed.
 pub fn run(root_dir: &Path) -> Result<String, String> {
     if std::env::var("MOTORLINK_ROS_E2E_SKIP").is_ok_and(|v| v == "1") {
         return Ok("ros-e2e skipped (MOTORLINK_ROS_E2E_SKIP=1)".into());
