@@ -244,8 +244,10 @@ fn add_clamped(s: &mut Sum, x: f32) -> bool {
 /// Brings the heading sum back into (−π, π] after a step of at most π: one 2π, in two parts, and
 /// a second if the first left it outside (the rounding's margin).
 fn wrap_heading(h: &mut Sum) {
-    if wrap_once(h) {
-        wrap_once(h);
+    for _ in 0..2 {
+        if !wrap_once(h) {
+            return;
+        }
     }
 }
 
