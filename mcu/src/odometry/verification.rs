@@ -146,10 +146,10 @@ pub fn heading_wrap_stays_bounded(src: &mut impl Source) {
 }
 
 /// The bits of every field of `o` but the counters (NaN and −0 compared as bits).
-fn state_bits(o: &Odometry) -> [u32; 10] {
+fn state_bits(o: &Odometry) -> [u32; 9] {
     let [x, y, h] = [o.x, o.y, o.heading];
     let [vx, vy, wz] = o.twist;
-    [x.hi, x.lo, y.hi, y.lo, h.hi, h.lo, vx, vy, wz, 0.0].map(f32::to_bits)
+    [x.hi, x.lo, y.hi, y.lo, h.hi, h.lo, vx, vy, wz].map(f32::to_bits)
 }
 
 fn data_bits(d: &OdometryData) -> [u32; 6] {
