@@ -54,8 +54,8 @@ impl<const N: usize> Step<N> {
     ) {
         let s = Self::draw(src, event);
         assume!(src, s.is_some());
-        let Some(s) = s else { return };
-        checks(src, &s);
+        let Some(s) = &s else { return };
+        checks(src, s);
     }
 }
 
@@ -154,7 +154,12 @@ pub fn step_preserves_invariant<const N: usize>(src: &mut impl Source) {
 }
 
 fn invariant_kept<const N: usize>(src: &mut impl Source, s: &Step<N>) {
-    let Step { l0, e, l, out } = *s;
+    let Step {
+        ref l0,
+        e,
+        ref l,
+        out,
+    } = *s;
     check!(l.is_valid(), "INV-0: step preserves the invariant");
     check!(out == l.output(), "step returns the state's output");
     let p = l.config().params();
@@ -271,7 +276,12 @@ pub fn comm_loss_age_advances<const N: usize>(src: &mut impl Source) {
 }
 
 fn age_advances<const N: usize>(src: &mut impl Source, s: &Step<N>) {
-    let Step { l0, e, l, out } = *s;
+    let Step {
+        ref l0,
+        e,
+        ref l,
+        out,
+    } = *s;
     if !no_valid_frame(&e) {
         return;
     }
@@ -327,7 +337,12 @@ pub fn applied_within_mode_limit<const N: usize>(src: &mut impl Source) {
 }
 
 fn within_mode_limit<const N: usize>(src: &mut impl Source, s: &Step<N>) {
-    let Step { l0, e, l, out } = *s;
+    let Step {
+        ref l0,
+        e,
+        ref l,
+        out,
+    } = *s;
     let p = *l.config().params();
     let ticked = e == Event::Tick;
     let modes = l.axis_modes();
@@ -396,7 +411,12 @@ pub fn rejected_frames_change_nothing_applied<const N: usize>(src: &mut impl Sou
 }
 
 fn refusal_changes_nothing<const N: usize>(src: &mut impl Source, s: &Step<N>) {
-    let Step { l0, e, l, out } = *s;
+    let Step {
+        ref l0,
+        e,
+        ref l,
+        out,
+    } = *s;
     if !matches!(e, Event::Rejected(_) | Event::Frame(_)) {
         return;
     }
@@ -572,7 +592,9 @@ pub fn brake_left_only_by_rearm_and_fresh_frames<const N: usize>(src: &mut impl 
 }
 
 fn brake_left_only_by_rearm<const N: usize>(src: &mut impl Source, s: &Step<N>) {
-    let Step { l0, e, l, .. } = *s;
+    let Step {
+        ref l0, e, ref l, ..
+    } = *s;
     if l0.brake_latched() && !l.brake_latched() {
         check!(e == Event::Tick, "INV-6: BRAKE is left only at a tick");
         check!(
@@ -668,7 +690,7 @@ pub fn latching_faults_cut_pwm_in_same_step<const N: usize>(src: &mut impl Sourc
 }
 
 fn latching_cuts_pwm<const N: usize>(src: &mut impl Source, s: &Step<N>) {
-    let Step { l0, e, out, .. } = *s;
+    let Step { ref l0, e, out, .. } = *s;
     if !is_latching_event(&e) {
         return;
     }
@@ -706,7 +728,12 @@ pub fn setpoint_step_is_bounded<const N: usize>(src: &mut impl Source) {
 }
 
 fn setpoint_step_bounded<const N: usize>(src: &mut impl Source, s: &Step<N>) {
-    let Step { l0, e, l, out } = *s;
+    let Step {
+        ref l0,
+        e,
+        ref l,
+        out,
+    } = *s;
     let p = *l.config().params();
     let bound = l.config().max_tick_step();
     if e != Event::Tick {
@@ -778,7 +805,7 @@ pub fn drive_follows_axis_modes<const N: usize>(src: &mut impl Source) {
 }
 
 fn drive_follows_modes<const N: usize>(src: &mut impl Source, s: &Step<N>) {
-    let Step { e, l, out, .. } = *s;
+    let Step { e, ref l, out, .. } = *s;
     let p = *l.config().params();
     if let Drive::Run(axes) = out.drive {
         let wants = l.last_valid().map(|sp| sp.axes);
