@@ -59,15 +59,9 @@ const LADDER_FILE: &str = "statemachine/src/verification.rs";
 pub const TWIN_OF: &[(&str, &str, &str, &str)] = &[
     (
         "protocol/src/cdc/verification.rs",
-        "verify_bit_flip_*",
-        "bit_flip_in_every_sample",
-        "one Kani entry per message kind; the twin flips every bit of a sample of each kind",
-    ),
-    (
-        "protocol/src/cdc/verification.rs",
         "verify_len_flip_*",
-        "bit_flip_in_every_sample",
-        "the LEN-byte half of the same body, run by the same twin",
+        "bit_flip_in_every_sample_for_every_bit",
+        "one Kani entry per message kind for the LEN byte; the test flips every bit of a sample of each kind",
     ),
     (
         "protocol/src/cdc/verification.rs",
@@ -123,6 +117,9 @@ pub const EXHAUSTIVE: &[&str] = &[
     "remainderf_by_tau_is_within_pi_for_every_f32",
     "append_keeps_the_bytes_in_order",
     "update_magnitudes_are_finite_at_the_bounds",
+    "bit_flip_refused_by_open_for_every_bit",
+    "bit_flip_refused_for_every_bit",
+    "bit_flip_in_every_sample_for_every_bit",
 ];
 
 /// One Kani harness found in the code.
