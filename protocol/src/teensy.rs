@@ -533,8 +533,8 @@ pub struct RobustStats {
 /// 3. otherwise (a non-zero byte, or a 0x00 right after another or at the start) it returns `None`.
 ///
 /// Checked against a naive reference that tries `decode_robust` on every slice ending at the
-/// byte, by the exhaustive test `robust_stream_holds_back_no_frame_exhaustively`, the Kani
-/// harness `verify_robust_holds_back_no_frame` with its twin, and the fuzz target
+/// byte, by the exhaustive tests `robust_stream_holds_back_no_frame_exhaustively` and
+/// `robust_holds_back_no_frame_after_every_byte`, the twin `robust_holds_back_no_frame`, and the fuzz target
 /// `fuzz_teensy_stream_holds_back_no_frame`.
 ///
 /// ```text

@@ -72,7 +72,7 @@ pub(crate) fn check_decode_total(src: &mut impl Source) {
 /// P-6, P-22: encode → decode round-trips in both formats, and the stream decoder delivers the robust
 /// frame. A twin only: Kani proves the frame halves (`verify_legacy_round_trip`,
 /// `verify_robust_round_trip` and its pieces) and the stream half (`verify_stream_delivers_frame`,
-/// and `verify_robust_holds_back_no_frame` for the sample command with the real decoder).
+/// and `robust_holds_back_no_frame_after_every_byte` for the sample command with the real decoder).
 #[cfg_attr(kani, allow(dead_code))]
 pub(crate) fn check_round_trip(src: &mut impl Source) {
     let m = any_msg(src);
@@ -438,50 +438,52 @@ pub(crate) fn check_against_reference(stream: &[u8], got: Option<Result<Msg, Rej
     }
 }
 
-/// Garbage bytes before the frame. Under Kani one byte of any value (zero or not: the frame then
-/// follows a 0x00 or merges with a run; more bytes made the proof run for many minutes): garbage
-/// of any length is covered by induction, `check_robust_push_step` proving from any state that
-/// the decoder keeps exactly the last non-zero bytes of the run. The twin draws up to 3 frames'
-/// worth, biased toward zeros and the frame's own bytes.
-const GARBAGE: usize = if cfg!(kani) { 1 } else { 3 * FRAME };
+/// Garbage bytes before the frame in the twin: up to 3 frames' worth, biased toward zeros and the
+/// frame's own bytes.
+const GARBAGE: usize = 3 * FRAME;
 
 /// P-5: No valid frame is held back by the bytes before it: any garbage, then a frame, fed byte by
 /// byte, gives at every byte what the [`reference`] says, and the frame is delivered at its 0x00.
-/// Under Kani the frame is the harnesses' sample command; the twin takes any command.
+/// A twin. Proven for any garbage by enumeration and induction: the test
+/// `robust_holds_back_no_frame_after_every_byte` runs [`holds_back_no_frame_in`] on every byte
+/// value before the sample frame (zero or not: the frame then follows a 0x00 or merges with a
+/// run), and `verify_robust_push_step` proves from any state that the decoder keeps exactly the
+/// last non-zero bytes of a run, so longer garbage leaves the decoder in a state one byte of
+/// garbage already reaches. (That one symbolic byte was a Kani harness: 132 s for 256 inputs.)
 pub(crate) fn check_robust_holds_back_no_frame(src: &mut impl Source) {
-    let m = if cfg!(kani) { sample() } else { any_msg(src) };
+    let m = any_msg(src);
     let mut frame = [0u8; ROBUST_BUF];
     check!(
         m.encode_robust(&mut frame) == Some(FRAME),
         "every frame has the fixed length"
     );
     let mut stream = [0u8; GARBAGE + FRAME];
-    let n = if cfg!(kani) {
-        GARBAGE
-    } else {
-        usize::from(src.u16_below(GARBAGE as u16 + 1))
-    };
+    let n = usize::from(src.u16_below(GARBAGE as u16 + 1));
     let garbage: [u8; GARBAGE] = src.bytes();
     stream[..GARBAGE].copy_from_slice(&garbage);
-    if !cfg!(kani) {
-        for (i, b) in stream[..n].iter_mut().enumerate() {
-            *b = match src.below(8) {
-                0 => 0,
-                1 | 2 => frame[i % FRAME],
-                _ => *b,
-            };
-        }
+    for (i, b) in stream[..n].iter_mut().enumerate() {
+        *b = match src.below(8) {
+            0 => 0,
+            1 | 2 => frame[i % FRAME],
+            _ => *b,
+        };
     }
     stream[n..n + FRAME].copy_from_slice(&frame[..FRAME]);
+    holds_back_no_frame_in(src, &stream[..n + FRAME], n, &m);
+}
+
+/// P-5 for one stream: `stream` is `n` bytes of garbage, then the frame of `m`. Fed byte by byte,
+/// it gives at every byte what the [`reference`] says, and `m` at its last byte.
+pub(crate) fn holds_back_no_frame_in(src: &mut impl Source, stream: &[u8], n: usize, m: &Msg) {
     let mut dec = RobustDecoder::<N>::new();
     let mut last = None;
-    for end in 1..=n + FRAME {
+    for end in 1..=stream.len() {
         let got = dec.push(stream[end - 1]);
         check_against_reference(&stream[..end], got);
         last = got;
     }
     check!(
-        last == Some(Ok(m)),
+        last == Some(Ok(*m)),
         "a valid frame after any garbage is delivered at its 0x00"
     );
     let run = stream[..n].iter().rev().take_while(|&&b| b != 0).count();
@@ -490,8 +492,8 @@ pub(crate) fn check_robust_holds_back_no_frame(src: &mut impl Source) {
     cover!(src, run < n, "a zero in the garbage");
 }
 
-/// The command of the Kani harness [`check_robust_holds_back_no_frame`]: a motor command with
-/// bytes of every kind (zeros, which COBS replaces, and a 0x0A).
+/// The sample command of the harnesses and of `robust_holds_back_no_frame_after_every_byte`: a
+/// motor command with bytes of every kind (zeros, which COBS replaces, and a 0x0A).
 fn sample() -> Msg {
     CmdMsg {
         cmd_type: CmdType::Mtrs,
@@ -907,15 +909,6 @@ mod proofs {
         check_robust_push_step(&mut KaniSource);
     }
 
-    /// The property of [`RobustDecoder`] (no valid frame held back), real CRC, any byte before a
-    /// frame of one motor (30 bytes); any longer garbage by induction with
-    /// `verify_robust_push_step`.
-    #[kani::proof]
-    #[kani::unwind(36)]
-    fn verify_robust_holds_back_no_frame() {
-        check_robust_holds_back_no_frame(&mut KaniSource);
-    }
-
     /// P-22 by composition: the stream decoder hands `decode_robust` exactly the frame's bytes
     /// and returns its answer, whatever that answer is. `decode_robust` is an uninterpreted
     /// function here ([`model::uninterpreted_decode_robust`]: any command or any refusal, the same
@@ -959,6 +952,22 @@ mod twins {
     #[test]
     fn robust_holds_back_no_frame() {
         Twin::run(0x7E_000C, 5_000, check_robust_holds_back_no_frame).assert_covered(3);
+    }
+
+    /// Every byte value, then the sample frame of one motor (real CRC): the whole input of the
+    /// one-byte case, with which `verify_robust_push_step`'s induction covers any garbage.
+    #[test]
+    fn robust_holds_back_no_frame_after_every_byte() {
+        let frame = sample_frame();
+        let mut g = 0u8;
+        let report = Twin::run(0x7E_000D, 256, |src| {
+            let mut stream = [g; 1 + FRAME];
+            stream[1..].copy_from_slice(&frame);
+            holds_back_no_frame_in(src, &stream, 1, &sample());
+            g = g.wrapping_add(1);
+        });
+        assert_eq!(g, 0, "all 256 byte values, then back to 0");
+        report.assert_covered(3);
     }
 
     #[test]
