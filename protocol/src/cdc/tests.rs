@@ -460,3 +460,108 @@ fn append_keeps_the_bytes_in_order() {
         (MAX_FRAME_LEN + 1) * (MAX_FRAME_LEN + 2) / 2
     );
 }
+
+/// The seed's STATUS `err` list (0 OK, 1 CRC_ERROR, 2 LEN_ERROR, 3 UNKNOWN_MSG, 4 IMU_FAIL), read
+/// back from the raw value, and the code and the safety core's reason of every failure as the
+/// module documentation maps them.
+#[test]
+fn error_codes_and_reasons_follow_the_seed() {
+    let seed = [
+        (0, ErrorCode::Ok),
+        (1, ErrorCode::CrcError),
+        (2, ErrorCode::LenError),
+        (3, ErrorCode::UnknownMsg),
+        (4, ErrorCode::ImuFail),
+    ];
+    for (raw, code) in seed {
+        assert_eq!(ErrorCode::from_raw(raw), Some(code), "err {raw}");
+    }
+    for raw in [5, 0x0100, u16::MAX] {
+        assert_eq!(ErrorCode::from_raw(raw), None, "err {raw}");
+    }
+    let failures = [
+        (Error::Crc, RejectReason::Crc, ErrorCode::CrcError),
+        (Error::Framing, RejectReason::Framing, ErrorCode::LenError),
+        (Error::Length, RejectReason::Decode, ErrorCode::LenError),
+        (
+            Error::UnknownMsg,
+            RejectReason::Decode,
+            ErrorCode::UnknownMsg,
+        ),
+        (Error::Value, RejectReason::Decode, ErrorCode::UnknownMsg),
+    ];
+    for (e, reason, code) in failures {
+        assert_eq!(e.reason(), reason, "{e:?}");
+        assert_eq!(e.error_code(), code, "{e:?}");
+    }
+}
+
+/// `duty` is the seed's `min(|pwm|·ARR/1000, ARR)` with the sign kept: within ±1000 a duty is
+/// itself, beyond it full scale on its own side.
+#[test]
+fn duty_saturates_at_full_scale_on_each_side() {
+    let p = SetMotorPwm {
+        pwm: [1001, -1001, i16::MIN, -7],
+        timeout_ms: 200,
+    };
+    assert_eq!(p.duty(), [1000, -1000, -1000, -7]);
+    let p = SetMotorPwm {
+        pwm: [i16::MAX, 1000, -1000, 999],
+        timeout_ms: 200,
+    };
+    assert_eq!(p.duty(), [1000, 1000, -1000, 999]);
+}
+
+/// STATUS `flags` as the seed numbers them (bit 0 motor_enabled, bit 1 estop_latched, bit 2
+/// cmd_timeout, bit 3 imu_ok), read from a received payload: flags 0x000A is ESTOP latched with the
+/// IMU healthy, motors disabled and no command timeout.
+#[test]
+fn status_flags_are_the_seeds_bits() {
+    assert_eq!(StatusFlags::MOTOR_ENABLED, 0x0001);
+    assert_eq!(StatusFlags::ESTOP_LATCHED, 0x0002);
+    assert_eq!(StatusFlags::CMD_TIMEOUT, 0x0004);
+    assert_eq!(StatusFlags::IMU_OK, 0x0008);
+    // t_ms 1, vbat 0, flags 0x000A, err 0.
+    let payload = [0x01, 0, 0, 0, 0, 0, 0x0A, 0x00, 0, 0];
+    let Ok(Message::Status(s)) = decode_frame(&frame(0x82, &payload)) else {
+        panic!("STATUS refused");
+    };
+    assert!(s.flags.has(StatusFlags::ESTOP_LATCHED));
+    assert!(s.flags.has(StatusFlags::IMU_OK));
+    assert!(s
+        .flags
+        .has(StatusFlags::ESTOP_LATCHED | StatusFlags::IMU_OK));
+    assert!(!s.flags.has(StatusFlags::MOTOR_ENABLED));
+    assert!(!s.flags.has(StatusFlags::CMD_TIMEOUT));
+    assert!(!s
+        .flags
+        .has(StatusFlags::ESTOP_LATCHED | StatusFlags::MOTOR_ENABLED));
+}
+
+/// A candidate that has ended cannot end again: at the byte where its CRC fails, the decoder lets
+/// go of it (no byte of it can start another frame: no `AA` after its SOF) and counts its bytes
+/// as dropped at once, not at the next byte.
+#[test]
+fn a_frame_with_a_bad_crc_is_let_go_at_its_last_byte() {
+    // PING: AA 55 10 00, then the seed's CRC over 10 00, 0x1E7C, low byte first.
+    let ping = [0xAA, 0x55, 0x10, 0x00, 0x7C, 0x1E];
+    assert_eq!(frame(0x10, &[]), ping);
+    let mut bad = ping;
+    bad[5] ^= 0x80;
+    let mut dec = StreamDecoder::new();
+    for &b in &bad[..5] {
+        assert_eq!(dec.push(b), None);
+    }
+    assert_eq!(dec.buffered(), 5);
+    assert_eq!(dec.push(bad[5]), Some(Err(Error::Crc)));
+    assert_eq!(dec.buffered(), 0);
+    assert_eq!(
+        dec.stats(),
+        Stats {
+            frames: 0,
+            crc_errors: 1,
+            message_errors: 0,
+            dropped_bytes: 6,
+        }
+    );
+}

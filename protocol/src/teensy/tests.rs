@@ -514,3 +514,28 @@ fn every_burst_within_the_stuffed_bytes_changes_the_crc() {
         }
     }
 }
+
+/// `unstuff` writes a block's body only into room for all of it, and only for a block of fewer
+/// than 254 data bytes (one code byte cannot say more; 254 would need the 0xFF code). The robust
+/// decoder always passes a buffer of the largest body and a block of a fixed length, so these are
+/// the function's own limits, checked here by hand-built blocks.
+#[test]
+fn unstuff_needs_room_for_the_body_and_fewer_than_254_data_bytes() {
+    // Body 11 00 22: the code 02 points at the zero (block byte 2), which holds 02, the distance
+    // to one past the block's end (4).
+    let block = [0x02, 0x11, 0x02, 0x22];
+    let mut out = [0xEE; 3];
+    assert_eq!(unstuff(&block, &mut out), Some(3));
+    assert_eq!(out, [0x11, 0x00, 0x22]);
+    assert_eq!(unstuff(&block, &mut [0xEE; 2]), None);
+    // 254 data bytes without a zero, code 0xFF: a chain that ends one past the block, but too long.
+    let mut long = [0x01; 255];
+    long[0] = 0xFF;
+    assert_eq!(unstuff(&long, &mut [0xEE; 254]), None);
+    // One data byte fewer, code 0xFE: the longest block accepted.
+    let mut longest = [0x01; 254];
+    longest[0] = 0xFE;
+    let mut out = [0xEE; 253];
+    assert_eq!(unstuff(&longest, &mut out), Some(253));
+    assert!(out.iter().all(|&b| b == 0x01));
+}
