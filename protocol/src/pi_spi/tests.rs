@@ -142,3 +142,66 @@ fn commands_for_the_ladder() {
     assert_eq!(shutdown, Event::Shutdown(true));
     assert!(matches!(frame, Event::Frame(Command { enable: false, .. })));
 }
+
+#[test]
+fn update_flags_are_the_seeds_bits() {
+    // The seed's table of `updates`: bits 0 to 5 are the one-shot flags, bit 7 the parity bit.
+    assert_eq!(UpdateFlags::MOTOR_PID_SPEED, 0x01);
+    assert_eq!(UpdateFlags::MOTOR_PID_POS, 0x02);
+    assert_eq!(UpdateFlags::IMU_ORIENTATION, 0x04);
+    assert_eq!(UpdateFlags::SAVE_IMU_CAL, 0x08);
+    assert_eq!(UpdateFlags::KINEMATICS, 0x10);
+    assert_eq!(UpdateFlags::ODOM_RESET, 0x20);
+    assert_eq!(UpdateFlags::PARITY_BIT, 0x80);
+    // KINEMATICS and ODOM_RESET: 0x30, two ones, so the parity bit is added on the wire.
+    let rx = RxBuffer {
+        updates: UpdateFlags(UpdateFlags::KINEMATICS | UpdateFlags::ODOM_RESET),
+        ..Default::default()
+    };
+    let mut b = [0u8; RX_LEN];
+    encode_rx(&rx, &mut b);
+    assert_eq!(b[1..5], [0xB0, 0, 0, 0]);
+}
+
+#[test]
+fn shutdown_raw_reads_each_bit_on_its_own() {
+    // The seed: bit 0 disables the servos, bit 1 the motors; the other bits say nothing.
+    let mut b = [0u8; RX_LEN];
+    for (byte, servos, motors) in [
+        (0x00, false, false),
+        (0x01, true, false),
+        (0x02, false, true),
+        (0x03, true, true),
+        (0xFC, false, false),
+    ] {
+        b[RX_SHUTDOWN_OFFSET] = byte;
+        assert_eq!(
+            shutdown_raw(&b),
+            Shutdown { servos, motors },
+            "byte {byte:#04x}"
+        );
+    }
+}
+
+#[test]
+fn each_servo_mode_in_its_own_two_bits() {
+    // The seed: servo n in bits 2n+1..2n of `servoMode`, ENABLED = 2. One servo enabled at a time.
+    use ServoMode::{Enabled, FullyDisabled as Off};
+    for (modes, byte) in [
+        ([Enabled, Off, Off, Off], 0x02),
+        ([Off, Enabled, Off, Off], 0x08),
+        ([Off, Off, Enabled, Off], 0x20),
+        ([Off, Off, Off, Enabled], 0x80),
+    ] {
+        assert_eq!(pack_servo_modes(modes), byte);
+        assert_eq!(unpack_servo_modes(byte), Some(modes));
+        let rx = RxBuffer {
+            servo_mode: modes,
+            ..Default::default()
+        };
+        let mut b = [0u8; RX_LEN];
+        encode_rx(&rx, &mut b);
+        assert_eq!(b[40], byte); // `servoMode` at offset 40
+        assert_eq!(decode_rx(&b).map(|d| d.servo_mode), Ok(modes));
+    }
+}
