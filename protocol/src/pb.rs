@@ -357,6 +357,31 @@ mod tests {
     }
 
     #[test]
+    fn reader_takes_values_that_end_exactly_at_the_payload_end() {
+        // fixed64 (field 1, wire type 1: key 0x09) and LEN (field 2, wire type 2: key 0x12, two
+        // bytes) whose last byte is the payload's last: read whole, then the end.
+        let mut r = Reader::new(&[0x09, 1, 2, 3, 4, 5, 6, 7, 8]);
+        assert_eq!(r.next_field(), Ok(Some((1, Value::I64))));
+        assert_eq!(r.next_field(), Ok(None));
+        let mut r = Reader::new(&[0x12, 0x02, 0xAA, 0xBB]);
+        assert_eq!(r.next_field(), Ok(Some((2, Value::Len))));
+        assert_eq!(r.next_field(), Ok(None));
+    }
+
+    #[test]
+    fn a_ten_byte_varint_may_carry_bit_63() {
+        // 7 bits per byte: nine bytes carry bits 0 to 62, the tenth byte's lowest bit is bit 63.
+        let mut top = [
+            0x08, 0x80, 0x80, 0x80, 0x80, 0x80, 0x80, 0x80, 0x80, 0x80, 0x01,
+        ];
+        let mut r = Reader::new(&top);
+        assert_eq!(r.next_field(), Ok(Some((1, Value::Varint(1 << 63)))));
+        top[1..10].fill(0xFF);
+        let mut r = Reader::new(&top);
+        assert_eq!(r.next_field(), Ok(Some((1, Value::Varint(u64::MAX)))));
+    }
+
+    #[test]
     fn reader_accepts_max_field_and_overlong_zero_padding() {
         // Field 2^29 - 1, varint 0 written in two bytes (80 00): legal protobuf.
         let mut r = Reader::new(&[0xF8, 0xFF, 0xFF, 0xFF, 0x0F, 0x80, 0x00]);
