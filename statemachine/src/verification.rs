@@ -154,12 +154,9 @@ pub fn step_preserves_invariant<const N: usize>(src: &mut impl Source) {
 }
 
 fn invariant_kept<const N: usize>(src: &mut impl Source, s: &Step<N>) {
-    let Step {
-        ref l0,
-        e,
-        ref l,
-        out,
-    } = *s;
+    let Step { e, out, .. } = *s;
+    let l0 = &s.l0;
+    let l = &s.l;
     check!(l.is_valid(), "INV-0: step preserves the invariant");
     check!(out == l.output(), "step returns the state's output");
     let p = l.config().params();
@@ -276,12 +273,9 @@ pub fn comm_loss_age_advances<const N: usize>(src: &mut impl Source) {
 }
 
 fn age_advances<const N: usize>(src: &mut impl Source, s: &Step<N>) {
-    let Step {
-        ref l0,
-        e,
-        ref l,
-        out,
-    } = *s;
+    let Step { e, out, .. } = *s;
+    let l0 = &s.l0;
+    let l = &s.l;
     if !no_valid_frame(&e) {
         return;
     }
@@ -337,12 +331,9 @@ pub fn applied_within_mode_limit<const N: usize>(src: &mut impl Source) {
 }
 
 fn within_mode_limit<const N: usize>(src: &mut impl Source, s: &Step<N>) {
-    let Step {
-        ref l0,
-        e,
-        ref l,
-        out,
-    } = *s;
+    let Step { e, out, .. } = *s;
+    let l0 = &s.l0;
+    let l = &s.l;
     let p = *l.config().params();
     let ticked = e == Event::Tick;
     let modes = l.axis_modes();
@@ -411,12 +402,9 @@ pub fn rejected_frames_change_nothing_applied<const N: usize>(src: &mut impl Sou
 }
 
 fn refusal_changes_nothing<const N: usize>(src: &mut impl Source, s: &Step<N>) {
-    let Step {
-        ref l0,
-        e,
-        ref l,
-        out,
-    } = *s;
+    let Step { e, out, .. } = *s;
+    let l0 = &s.l0;
+    let l = &s.l;
     if !matches!(e, Event::Rejected(_) | Event::Frame(_)) {
         return;
     }
@@ -592,9 +580,9 @@ pub fn brake_left_only_by_rearm_and_fresh_frames<const N: usize>(src: &mut impl 
 }
 
 fn brake_left_only_by_rearm<const N: usize>(src: &mut impl Source, s: &Step<N>) {
-    let Step {
-        ref l0, e, ref l, ..
-    } = *s;
+    let Step { e, .. } = *s;
+    let l0 = &s.l0;
+    let l = &s.l;
     if l0.brake_latched() && !l.brake_latched() {
         check!(e == Event::Tick, "INV-6: BRAKE is left only at a tick");
         check!(
@@ -690,7 +678,8 @@ pub fn latching_faults_cut_pwm_in_same_step<const N: usize>(src: &mut impl Sourc
 }
 
 fn latching_cuts_pwm<const N: usize>(src: &mut impl Source, s: &Step<N>) {
-    let Step { ref l0, e, out, .. } = *s;
+    let Step { e, out, .. } = *s;
+    let l0 = &s.l0;
     if !is_latching_event(&e) {
         return;
     }
@@ -728,12 +717,9 @@ pub fn setpoint_step_is_bounded<const N: usize>(src: &mut impl Source) {
 }
 
 fn setpoint_step_bounded<const N: usize>(src: &mut impl Source, s: &Step<N>) {
-    let Step {
-        ref l0,
-        e,
-        ref l,
-        out,
-    } = *s;
+    let Step { e, out, .. } = *s;
+    let l0 = &s.l0;
+    let l = &s.l;
     let p = *l.config().params();
     let bound = l.config().max_tick_step();
     if e != Event::Tick {
@@ -805,7 +791,8 @@ pub fn drive_follows_axis_modes<const N: usize>(src: &mut impl Source) {
 }
 
 fn drive_follows_modes<const N: usize>(src: &mut impl Source, s: &Step<N>) {
-    let Step { e, ref l, out, .. } = *s;
+    let Step { e, out, .. } = *s;
+    let l = &s.l;
     let p = *l.config().params();
     if let Drive::Run(axes) = out.drive {
         let wants = l.last_valid().map(|sp| sp.axes);
