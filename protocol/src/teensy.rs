@@ -534,8 +534,8 @@ pub struct RobustStats {
 ///
 /// Checked against a naive reference that tries `decode_robust` on every slice ending at the
 /// byte, by the exhaustive tests `robust_stream_holds_back_no_frame_exhaustively` and
-/// `robust_holds_back_no_frame_after_every_byte`, the twin `robust_holds_back_no_frame`, and the fuzz target
-/// `fuzz_teensy_stream_holds_back_no_frame`.
+/// `robust_holds_back_no_frame_after_every_byte`, the twin `robust_holds_back_no_frame`, and the
+/// fuzz target `fuzz_teensy_stream_holds_back_no_frame`.
 ///
 /// ```text
 ///  bytes:  13 37 03 02 … D9 00 03 02 … D9 00

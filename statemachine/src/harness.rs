@@ -234,6 +234,17 @@ impl Twin {
         }
     }
 
+    /// Runs `body` once for each index `0..cases`, in order, and reports what it saw: a test that
+    /// enumerates a finite input (a bit of a frame, a byte value) passes the index, the source
+    /// still drawing anything else and recording the covers.
+    pub fn each(seed: u64, cases: u32, mut body: impl FnMut(&mut Self, u32)) -> Report {
+        let mut i = 0;
+        Self::run(seed, cases, |t| {
+            body(t, i);
+            i += 1;
+        })
+    }
+
     fn next(&mut self) -> u64 {
         // splitmix64
         self.state = self.state.wrapping_add(0x9E37_79B9_7F4A_7C15);

@@ -979,13 +979,10 @@ mod twins {
             *f = valid_command_frame(&mut t);
         }
         for f in &frames {
-            let mut bit = 0;
-            let report = Twin::run(0xA3_000C, FRAME_LEN as u32 * 8, |src| {
-                check_bit_flip_refused_by_open(src, f, bit);
-                bit += 1;
-            });
-            assert_eq!(bit, FRAME_LEN * 8, "every bit flipped once");
-            report.assert_covered(3);
+            Twin::each(0xA3_000C, FRAME_LEN as u32 * 8, |src, bit| {
+                check_bit_flip_refused_by_open(src, f, bit as usize);
+            })
+            .assert_covered(3);
         }
     }
 

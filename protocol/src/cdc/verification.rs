@@ -933,25 +933,14 @@ mod twins {
             let seed = 0xC0_0020 + u64::from(kind);
             let m = sample_of(kind);
             let n = m.encode(&mut [0u8; MAX_FRAME_LEN]);
-            let others = (n - 1) * 8;
-            let mut at = 0u16;
-            let report = Twin::run(seed, others as u32, |src| {
-                check_bit_flip_detected_in(src, &m, Flip::OtherBytes, at);
-                at += 1;
-            });
-            assert_eq!(
-                usize::from(at),
-                others,
-                "every bit outside LEN flipped once"
-            );
-            report.assert_covered(3);
-            let mut at = 0u16;
-            let report = Twin::run(seed, 8, |src| {
-                check_bit_flip_detected_in(src, &m, Flip::LenByte, at);
-                at += 1;
-            });
-            assert_eq!(at, 8, "every bit of LEN flipped once");
-            report.assert_covered(1);
+            Twin::each(seed, (n as u32 - 1) * 8, |src, at| {
+                check_bit_flip_detected_in(src, &m, Flip::OtherBytes, at as u16);
+            })
+            .assert_covered(3);
+            Twin::each(seed, 8, |src, at| {
+                check_bit_flip_detected_in(src, &m, Flip::LenByte, at as u16);
+            })
+            .assert_covered(1);
         }
     }
 

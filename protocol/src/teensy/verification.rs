@@ -959,15 +959,12 @@ mod twins {
     #[test]
     fn robust_holds_back_no_frame_after_every_byte() {
         let frame = sample_frame();
-        let mut g = 0u8;
-        let report = Twin::run(0x7E_000D, 256, |src| {
-            let mut stream = [g; 1 + FRAME];
+        Twin::each(0x7E_000D, 256, |src, g| {
+            let mut stream = [g as u8; 1 + FRAME];
             stream[1..].copy_from_slice(&frame);
             holds_back_no_frame_in(src, &stream, 1, &sample());
-            g = g.wrapping_add(1);
-        });
-        assert_eq!(g, 0, "all 256 byte values, then back to 0");
-        report.assert_covered(3);
+        })
+        .assert_covered(3);
     }
 
     #[test]
@@ -1021,13 +1018,10 @@ mod twins {
     #[test]
     fn bit_flip_refused_for_every_bit() {
         fn every_bit<const M: usize>(t: &mut Twin, f: &[u8]) {
-            let mut bit = 0;
-            let report = Twin::run(u64::from(t.u32()), f.len() as u32 * 8, |src| {
-                check_bit_flip_refused::<M>(src, f, bit);
-                bit += 1;
-            });
-            assert_eq!(bit, f.len() * 8, "every bit of {f:02x?} flipped once");
-            report.assert_covered(3);
+            Twin::each(u64::from(t.u32()), f.len() as u32 * 8, |src, bit| {
+                check_bit_flip_refused::<M>(src, f, bit as usize);
+            })
+            .assert_covered(3);
         }
         fn frames<const M: usize>(t: &mut Twin) {
             for _ in 0..200 {
