@@ -365,3 +365,52 @@ fn no_non_finite_field_for_random_raw_inputs() {
         }
     }
 }
+
+/// The cosine the attitude judgement compares with its thresholds, for a reading of the sensor in
+/// its power-on orientation: the filter's gravity against the measured one.
+fn judged_cos(f: &ImuFusion, accel: [i16; 3]) -> f32 {
+    let measured = ops::rotate(IDENTITY, &Vector3::from(accel.map(f32::from)), MS2_PER_LSB);
+    let expected = f.filter.quat.inverse_transform_vector(&Vector3::z());
+    expected.dot(&measured) / measured.norm()
+}
+
+#[test]
+fn attitude_level_follows_the_angle_between_measured_and_estimated_gravity() {
+    // Level and settled; then one reading of 1 g tilted θ about x: (0, sin θ, cos θ) g. The step
+    // turns the estimate at most 2·β·dt = 0.001 rad (0.06°) towards it, so it stays ≈ θ off.
+    for (deg, accel, level) in [
+        (1, [0, 286, 16_382], 3),
+        (5, [0, 1428, 16_322], 2),
+        (15, [0, 4240, 15_826], 1),
+        (90, [0, ONE_G, 0], 1),
+        (180, [0, 0, -ONE_G], 1),
+    ] {
+        let mut f = started();
+        assert_eq!(f.attitude_level(), 3, "level and still");
+        let d = f.update(accel, [0; 3], TEMP_25C);
+        assert_eq!(f.attitude_level(), level, "{deg}° off");
+        assert_eq!(d.gyro.accuracy, level, "{deg}° off");
+        assert_eq!(d.accel.accuracy, level, "{deg}° off");
+        assert_eq!(d.linear_accel.accuracy, level, "{deg}° off");
+    }
+}
+
+#[test]
+fn attitude_level_exactly_at_a_threshold_is_the_lower_one() {
+    // "< 2° off" is level 3, "2° … 10°" level 2, "≥ 10°" level 1: a reading whose cosine with the
+    // estimate is exactly the threshold's is level 2 at 2° and level 1 at 10°. Each reading (about
+    // 2.06° and 10.06° tilted about x, the step taking 0.06° off) lands there to the last bit.
+    for (accel, threshold, level) in [
+        ([0, 586, 16_311], COS_2_DEG, 2),
+        ([0, 2903, 16_368], COS_10_DEG, 1),
+    ] {
+        let mut f = started();
+        f.update(accel, [0; 3], TEMP_25C);
+        assert_eq!(
+            judged_cos(&f, accel),
+            threshold,
+            "{accel:?} is not on the threshold"
+        );
+        assert_eq!(f.attitude_level(), level, "{accel:?}");
+    }
+}
