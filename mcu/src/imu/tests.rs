@@ -414,3 +414,31 @@ fn attitude_level_exactly_at_a_threshold_is_the_lower_one() {
         assert_eq!(f.attitude_level(), level, "{accel:?}");
     }
 }
+
+#[test]
+fn acceleration_that_cannot_be_gravity_steps_the_filter_on_the_gyro_alone() {
+    // 0.3 g along x and 1.8 g along y, neither saturated: outside 0.5 g … 1.5 g. With no rotation
+    // measured the estimate stays level, and the level judged before stays (not quasi-static).
+    let mut f = started();
+    run(&mut f, HZ, [4915, 0, 0], [0; 3]);
+    let d = run(&mut f, HZ, [0, 29_491, 0], [0; 3]);
+    assert_eq!(f.counters().accel_rejected, 2 * HZ);
+    let q = d.dmp_quat;
+    assert!(close(q.w, 1.0, 1e-6), "{q:?}");
+    assert_eq!(f.attitude_level(), 3);
+    assert_eq!(d.linear_accel.accuracy, 3);
+}
+
+#[test]
+fn a_usable_reading_that_is_not_quasi_static_leaves_the_level_as_judged() {
+    // 1.2 g along y: within 0.5 g … 1.5 g, so the filter steps with it, but outside 1 g ± 10 %,
+    // so the level is not judged on it although it is 90° off the level estimate.
+    let mut f = started();
+    let d = f.update([0, 19_661, 0], [0; 3], TEMP_25C);
+    assert_eq!(f.counters().accel_rejected, 0);
+    assert_eq!(f.attitude_level(), 3);
+    assert_eq!(d.linear_accel.accuracy, 3);
+    // The same direction at 1 g is judged.
+    f.update([0, ONE_G, 0], [0; 3], TEMP_25C);
+    assert_eq!(f.attitude_level(), 1);
+}
