@@ -442,3 +442,55 @@ fn a_usable_reading_that_is_not_quasi_static_leaves_the_level_as_judged() {
     f.update([0, ONE_G, 0], [0; 3], TEMP_25C);
     assert_eq!(f.attitude_level(), 1);
 }
+
+#[test]
+fn start_up_bias_is_accepted_up_to_30_dps_per_axis_and_refused_beyond() {
+    // 30 °/s is 30 × 131 = 3930 counts. A constant rate over the whole window is taken as the bias.
+    for gyro in [[3930, -3930, 0], [0, 0, -3930], [3930, 3930, 3930]] {
+        let mut f = ImuFusion::new(HZ);
+        run(&mut f, HZ, LEVEL, gyro);
+        assert!(f.bias_ready(), "{gyro:?}");
+        assert_eq!(f.counters().bias_restarts, 0, "{gyro:?}");
+        // That rate now reads as no rotation.
+        let d = f.update(LEVEL, gyro, TEMP_25C);
+        for v in [d.gyro.x, d.gyro.y, d.gyro.z] {
+            assert!(v.abs() < 1e-4, "{gyro:?}: {:?}", d.gyro);
+        }
+    }
+    // One count more, on any axis and either side, or far more: not believed, the window restarts.
+    for gyro in [
+        [3931, 0, 0],
+        [0, -3931, 0],
+        [0, 0, 3931],
+        [-3931, 3930, 0],
+        [0, 0, 20_000],
+    ] {
+        let mut f = ImuFusion::new(HZ);
+        run(&mut f, HZ, LEVEL, gyro);
+        assert!(!f.bias_ready(), "{gyro:?}");
+        assert_eq!(f.counters().bias_restarts, 1, "{gyro:?}");
+        let d = f.update(LEVEL, gyro, TEMP_25C);
+        assert_eq!(d.gyro.accuracy, 0, "{gyro:?}");
+    }
+}
+
+#[test]
+fn start_up_takes_1_g_along_any_axis_as_still() {
+    // The magnitude counts, not the direction: each axis up or down, and (1, 1, 1)/√3 g.
+    for accel in [
+        [ONE_G, 0, 0],
+        [-ONE_G, 0, 0],
+        [0, ONE_G, 0],
+        [0, -ONE_G, 0],
+        [0, 0, ONE_G],
+        [0, 0, -ONE_G],
+        [9459, 9459, 9459],
+    ] {
+        let mut f = ImuFusion::new(HZ);
+        run(&mut f, HZ - 1, accel, [0; 3]);
+        assert!(!f.bias_ready(), "{accel:?}");
+        run(&mut f, 1, accel, [0; 3]);
+        assert!(f.bias_ready(), "{accel:?}");
+        assert_eq!(f.counters().bias_restarts, 0, "{accel:?}");
+    }
+}
