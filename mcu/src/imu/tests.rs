@@ -494,3 +494,83 @@ fn start_up_takes_1_g_along_any_axis_as_still() {
         assert_eq!(f.counters().bias_restarts, 0, "{accel:?}");
     }
 }
+
+/// The five vectors of an `ImuData`, in field order.
+fn vectors(d: &mut ImuData) -> [&mut SensorData; 5] {
+    [
+        &mut d.gyro,
+        &mut d.accel,
+        &mut d.compass,
+        &mut d.linear_accel,
+        &mut d.accel_velocity,
+    ]
+}
+
+#[test]
+fn a_non_finite_field_goes_as_zeros_or_the_last_value_and_is_counted() {
+    // From finite readings the update computes nothing non-finite, so the last check before an
+    // `ImuData` leaves is given here one spoilt component at a time.
+    let mut f = started();
+    let good = f.update(LEVEL, [0, 0, TEN_DPS], TEMP_25C);
+    let mut counted = f.counters().non_finite;
+    assert_eq!(f.guard(good), good);
+    assert_eq!(f.counters().non_finite, counted, "nothing to replace");
+    for bad in [f32::NAN, f32::INFINITY, f32::NEG_INFINITY] {
+        // A vector: zeros, accuracy 0.
+        for v in 0..5 {
+            for c in 0..3 {
+                let mut d = good;
+                let s = vectors(&mut d).into_iter().nth(v).unwrap();
+                match c {
+                    0 => s.x = bad,
+                    1 => s.y = bad,
+                    _ => s.z = bad,
+                }
+                let mut want = good;
+                *vectors(&mut want).into_iter().nth(v).unwrap() = SensorData::default();
+                assert_eq!(f.guard(d), want, "vector {v}, component {c}: {bad}");
+                counted += 1;
+                assert_eq!(f.counters().non_finite, counted);
+            }
+        }
+        // The quaternion: the last one sent.
+        for c in 0..4 {
+            let mut d = good;
+            let q = &mut d.dmp_quat;
+            match c {
+                0 => q.w = bad,
+                1 => q.x = bad,
+                2 => q.y = bad,
+                _ => q.z = bad,
+            }
+            assert_eq!(f.guard(d), good, "quaternion component {c}: {bad}");
+            counted += 1;
+            assert_eq!(f.counters().non_finite, counted);
+        }
+        // The heading and the temperature: 0.
+        let (mut d, mut want) = (good, good);
+        d.heading = bad;
+        want.heading = 0.0;
+        assert_eq!(f.guard(d), want, "heading: {bad}");
+        let (mut d, mut want) = (good, good);
+        d.temperature = bad;
+        want.temperature = 0.0;
+        assert_eq!(f.guard(d), want, "temperature: {bad}");
+        counted += 2;
+        assert_eq!(f.counters().non_finite, counted);
+    }
+}
+
+#[test]
+fn a_quaternion_is_finite_only_if_each_coordinate_is() {
+    assert!(finite_quat(&UnitQuaternion::identity()));
+    for bad in [f32::NAN, f32::INFINITY, f32::NEG_INFINITY] {
+        for c in 0..4 {
+            let mut wxyz = [0.5f32; 4];
+            wxyz[c] = bad;
+            let [w, x, y, z] = wxyz;
+            let q = UnitQuaternion::new_unchecked(nalgebra::Quaternion::new(w, x, y, z));
+            assert!(!finite_quat(&q), "component {c}: {bad}");
+        }
+    }
+}
