@@ -574,3 +574,43 @@ fn a_quaternion_is_finite_only_if_each_coordinate_is() {
         }
     }
 }
+
+#[test]
+fn a_half_turn_goes_with_w_plus_zero() {
+    // Sensor mounted turned half about z: board x = −sensor x, board y = −sensor y. The world frame
+    // stays, so the board's x axis now points against the power-on one: heading 180°, and the
+    // filter holds a half turn about z, whose w is 0. w ≥ 0 down to its sign bit: that quaternion
+    // is not negated into one with w = −0.
+    let mut f = started();
+    f.set_orientation([-1, 0, 0, 0, -1, 0, 0, 0, 1], IDENTITY)
+        .unwrap();
+    let d = f.update(LEVEL, [0; 3], TEMP_25C);
+    let q = d.dmp_quat;
+    assert!(q.w == 0.0 && q.w.is_sign_positive(), "{q:?}");
+    assert!(close(q.z.abs(), 1.0, 1e-6), "{q:?}");
+    assert!(close(d.heading, 180.0, 1e-3), "heading {}", d.heading);
+}
+
+#[test]
+fn heading_of_a_tilted_board_is_that_of_its_x_axis_seen_from_above() {
+    // Rolled +90° about x: the x axis stays along the power-on one. Pitched 30° about y (gravity
+    // on the board (−sin 30°, 0, cos 30°)): the x axis points down along the power-on one. Both
+    // have heading 0; the tilt is found from gravity, q = (cos 45°, sin 45°, 0, 0) and
+    // (cos 15°, 0, sin 15°, 0).
+    let s15 = 15.0f32.to_radians().sin();
+    let h = core::f32::consts::FRAC_1_SQRT_2;
+    for (accel, [x, y]) in [([0, ONE_G, 0], [h, 0.0]), ([-8192, 0, 14_189], [0.0, s15])] {
+        let mut f = ImuFusion::new(HZ);
+        let d = run(&mut f, 2 * HZ, accel, [0; 3]);
+        let q = d.dmp_quat;
+        assert!(
+            close(q.x, x, 0.02) && close(q.y, y, 0.02),
+            "{accel:?}: {q:?}"
+        );
+        assert!(
+            d.heading < 0.5 || d.heading > 359.5,
+            "{accel:?}: heading {}",
+            d.heading
+        );
+    }
+}
