@@ -617,8 +617,8 @@ fn heading_deg(q: &UnitQuaternion<f32>) -> f32 {
     let left_of_x = 2.0 * (x * y + w * z);
     let along_x = 1.0 - 2.0 * (y * y + z * z);
     let yaw = RealField::atan2(left_of_x, along_x).to_degrees();
-    // atan2 is within ±180°.
-    let h = if yaw > 0.0 { 360.0 - yaw } else { -yaw };
+    // atan2 is within ±180°. 0 − yaw, not −yaw: a yaw of +0 gives +0, not −0.
+    let h = if yaw > 0.0 { 360.0 - yaw } else { 0.0 - yaw };
     // 360 − a tiny yaw rounds to 360.0 itself.
     if h >= 360.0 || !h.is_finite() {
         0.0

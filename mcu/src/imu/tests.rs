@@ -614,3 +614,15 @@ fn heading_of_a_tilted_board_is_that_of_its_x_axis_seen_from_above() {
         );
     }
 }
+
+#[test]
+fn heading_at_the_power_on_heading_is_plus_zero() {
+    // [0, 360) down to the sign bit: the still board at its power-on heading sends +0, not −0.
+    let mut f = started();
+    let d = f.update(LEVEL, [0; 3], TEMP_25C);
+    assert!(
+        d.heading == 0.0 && d.heading.is_sign_positive(),
+        "heading {:?}",
+        d.heading
+    );
+}
