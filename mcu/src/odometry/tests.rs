@@ -590,3 +590,51 @@ fn arc_factors_match_the_closed_form_across_the_series_threshold() {
     }
     assert_eq!(arc_factors(0.0), (1.0, 0.0));
 }
+
+#[test]
+fn position_reads_as_the_nearest_f32_to_the_exact_sum() {
+    // Wheel 0 moves the robot 1 m per count, wheel 1 2⁻²⁶ m per count (both exact in f32).
+    let k = KinematicsConfig {
+        inverse: [[1.0, 1.0, 0.0, 0.0], [0.0; 4], [0.0; 4]],
+        ticks_to_rad: [1.0, 1.0 / (1u64 << 26) as f32, 1.0, 1.0],
+    };
+    let mut rig = Rig::new(k, [0; 4]);
+    let d = rig.step([1, 0, 0, 0]);
+    assert_eq!(d.pos_x, 1.0);
+    // 1 + 3·2⁻²⁶ m: the f32 below 1 are 2⁻²⁴ apart, above it 2⁻²³, so the nearest f32 is 1 itself
+    // (0.75·2⁻²⁴ away), not 1 − 2⁻²⁴ nor 1 + 2⁻²³.
+    let d = rig.step([0, 3, 0, 0]);
+    assert_eq!(d.pos_x, 1.0);
+    // 1 + 6·2⁻²⁶ = 1 + 0.75·2⁻²³ m: nearest 1 + 2⁻²³ (a plain f32 sum would have stayed at 1).
+    let d = rig.step([0, 3, 0, 0]);
+    assert_eq!(d.pos_x, 1.0 + f32::EPSILON);
+    // Back by 3·2⁻²⁶ and then 3·2⁻²⁶ again: 1 + 3·2⁻²⁶, then exactly 1.
+    let d = rig.step([0, -3, 0, 0]);
+    assert_eq!(d.pos_x, 1.0);
+    let d = rig.step([0, -3, 0, 0]);
+    assert_eq!(d.pos_x, 1.0);
+    assert_eq!((d.pos_y, d.heading), (0.0, 0.0));
+}
+
+#[test]
+fn position_exactly_at_the_bound_is_not_clamped() {
+    // 10 m per count of wheel 0 (exact): 10 000 counts are exactly MAX_POSITION_M.
+    let k = KinematicsConfig {
+        inverse: [[10.0, 0.0, 0.0, 0.0], [0.0; 4], [0.0; 4]],
+        ticks_to_rad: [1.0; 4],
+    };
+    let mut rig = Rig::new(k, [0; 4]);
+    let d = rig.step([10_000, 0, 0, 0]);
+    assert_eq!(d.pos_x, MAX_POSITION_M);
+    assert_eq!(rig.o.counters().position_clamped, 0);
+    let d = rig.step([-20_000, 0, 0, 0]);
+    assert_eq!(d.pos_x, -MAX_POSITION_M);
+    assert_eq!(rig.o.counters().position_clamped, 0);
+    // One count (10 m) beyond it is clamped and counted; one back is 10 m inside.
+    let d = rig.step([-1, 0, 0, 0]);
+    assert_eq!(d.pos_x, -MAX_POSITION_M);
+    assert_eq!(rig.o.counters().position_clamped, 1);
+    let d = rig.step([1, 0, 0, 0]);
+    assert_eq!(d.pos_x, -MAX_POSITION_M + 10.0);
+    assert_eq!(rig.o.counters().position_clamped, 1);
+}
