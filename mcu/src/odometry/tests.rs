@@ -638,3 +638,48 @@ fn position_exactly_at_the_bound_is_not_clamped() {
     assert_eq!(d.pos_x, -MAX_POSITION_M + 10.0);
     assert_eq!(rig.o.counters().position_clamped, 1);
 }
+
+#[test]
+fn half_turn_lands_on_pi_and_minus_half_turn_just_below_it() {
+    // Wheel 3 turns the robot by the f32 `PI` per count (π + 8.7·10⁻⁸ rad).
+    let k = KinematicsConfig {
+        inverse: [[0.0; 4], [0.0; 4], [0.0, 0.0, 0.0, 1.0]],
+        ticks_to_rad: [1.0, 1.0, 1.0, PI],
+    };
+    let mut rig = Rig::new(k, [0; 4]);
+    // Counter-clockwise: the heading is `PI`, the end of (−π, π] that the output keeps.
+    let d = rig.step([0, 0, 0, 1]);
+    assert_eq!(d.heading, PI);
+    assert_eq!((d.pos_x, d.pos_y), (0.0, 0.0));
+    // Clockwise back to 0, then once more: −π − 8.7·10⁻⁸ rad is the angle π − 8.7·10⁻⁸, whose
+    // nearest f32 is the one below `PI` (π − 1.5·10⁻⁷; `PI` itself is 1.7·10⁻⁷ away).
+    let d = rig.step([0, 0, 0, -1]);
+    assert_eq!(d.heading, 0.0);
+    let d = rig.step([0, 0, 0, -1]);
+    assert_eq!(d.heading, f32::from_bits(PI.to_bits() - 1));
+    assert_eq!(rig.o.counters().large_rotations, 0);
+}
+
+#[test]
+fn data_reports_a_heading_sum_at_minus_pi_or_outside_as_pi() {
+    // `update` keeps the heading sum within (−π, π]; `data` still maps any other value (the
+    // finiteness argument in `verification` relies on it) to `PI`, the same angle as −π.
+    let mut o = Odometry::new();
+    o.configure(&diff_drive(ARC_T2R)).unwrap();
+    let inside_below_pi = f32::from_bits(PI.to_bits() - 1);
+    for (hi, lo, want) in [
+        (-PI, 0.0, PI),
+        // −π − 8.7·10⁻⁸ + 10⁻⁷ still rounds to −`PI` (the f32 above it is 2.4·10⁻⁷ away).
+        (-PI, 1e-7, PI),
+        (4.0, 0.0, PI),
+        (-4.0, 0.0, PI),
+        (-TAU, 0.0, PI),
+        (f32::NAN, 0.0, PI),
+        (PI, 0.0, PI),
+        (-inside_below_pi, 0.0, -inside_below_pi),
+        (1.0, 0.0, 1.0),
+    ] {
+        o.heading = Sum { hi, lo };
+        assert_eq!(o.data().heading, want, "heading sum ({hi}, {lo})");
+    }
+}
