@@ -683,3 +683,76 @@ fn data_reports_a_heading_sum_at_minus_pi_or_outside_as_pi() {
         assert_eq!(o.data().heading, want, "heading sum ({hi}, {lo})");
     }
 }
+
+/// The f32 on either side of `x` (both the same if `x` is one).
+fn f32_neighbours(x: f64) -> (f32, f32) {
+    let r = x as f32;
+    let r64 = f64::from(r);
+    if r64 == x {
+        (r, r)
+    } else if r64 < x {
+        (r, r.next_up())
+    } else {
+        (r.next_down(), r)
+    }
+}
+
+/// sin θ / θ and (1 − cos θ) / θ = 2 sin²(θ/2) / θ in f64, θ the f32 angle.
+fn exact_arc_factors(th: f32) -> (f64, f64) {
+    let t = f64::from(th);
+    let half = (t / 2.0).sin();
+    (t.sin() / t, 2.0 * half * half / t)
+}
+
+#[test]
+fn series_arc_factors_are_faithfully_rounded() {
+    // The series' truncation is below 3·10⁻¹⁶ relative, so both factors come out as one of the two
+    // f32 next to the exact value, over the series' whole range (every 65 536th f32 below the
+    // threshold, and the last 4096, where the dropped terms would be largest), on both signs.
+    let top = SMALL_ANGLE.to_bits();
+    let angles = (1..top).step_by(1 << 16).chain(top - 4096..top);
+    // And at 7.4515·10⁻³ rad, where (1 − cos θ)/θ lies 4 % of an ulp below an f32: the next f32
+    // up is already more than an ulp away.
+    let angles = angles.chain(0x3bf4_2ba6..=0x3bf4_2baf);
+    for bits in angles {
+        let th = f32::from_bits(bits);
+        assert!(th.abs() < SMALL_ANGLE);
+        let (ea, eb) = exact_arc_factors(th);
+        for (th, eb) in [(th, eb), (-th, -eb)] {
+            let (a, b) = arc_factors(th);
+            let (a_lo, a_hi) = f32_neighbours(ea);
+            let (b_lo, b_hi) = f32_neighbours(eb);
+            assert!(
+                a == a_lo || a == a_hi,
+                "θ = {th:e}: a = {a:e}, exact {ea:e}"
+            );
+            assert!(
+                b == b_lo || b == b_hi,
+                "θ = {th:e}: b = {b:e}, exact {eb:e}"
+            );
+        }
+    }
+}
+
+#[test]
+fn series_arc_factor_a_is_correctly_rounded_near_rounding_midpoints() {
+    // a = 1 − θ²/6·(1 − θ²/20): the roundings before the last subtraction are below 10⁻⁴ of an ulp
+    // of a, so a is the f32 nearest to sin θ / θ, even at these angles near the threshold, where
+    // sin θ / θ lies 0.3 % to 3 % of an ulp from the midpoint between two f32 (the last two: almost
+    // exactly on one).
+    for bits in [
+        0x3c23_cdea_u32,
+        0x3c23_82d5,
+        0x3c23_379d,
+        0x3c23_d01d,
+        0x3c23_8505,
+        0x3c22_c6bd,
+        0x3c20_ff4e,
+    ] {
+        let th = f32::from_bits(bits);
+        let (ea, _) = exact_arc_factors(th);
+        let want = ea as f32;
+        assert_eq!(arc_factors(th).0, want, "θ = {th:e}, exact {ea:e}");
+        assert_eq!(arc_factors(-th).0, want, "θ = {:e}", -th);
+    }
+}
