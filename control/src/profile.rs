@@ -295,6 +295,20 @@ impl Trapezoid {
     }
 }
 
+/// What [`toward`] needs: `1 ≤ a < 2³¹` (an `accel_step` of a valid [`ProfileLimits`]) and
+/// |u| ≤ 2³¹ (a velocity, or its negation).
+#[cfg(any(test, kani))]
+pub(crate) const fn toward_needs(u: i64, a: i64) -> bool {
+    a >= 1 && a <= i32::MAX as i64 && u.unsigned_abs() <= 1 << 31
+}
+
+/// What [`toward`] gives, from what it needs: a speed `w` within `u ± a`, and 0 for an axis at
+/// rest on its target (`u` = 0, `d` = 0).
+#[cfg(any(test, kani))]
+pub(crate) const fn toward_gives(u: i64, d: u64, a: i64, w: i64) -> bool {
+    w >= u.wrapping_sub(a) && w <= u.wrapping_add(a) && (u != 0 || d != 0 || w == 0)
+}
+
 /// The stopping distance, in sub-steps, of the speed v = k·a + r (0 ≤ r < a, in sub-steps per
 /// tick) falling by `a` per tick: v + (v − a) + … + r = (k + 1)(v + r)/2 (the product is even).
 /// With v ≤ 2³² and a ≥ 1 it stays below 2⁶³, so the saturating operations never saturate.
@@ -306,7 +320,15 @@ fn stopping(k: u64, r: u64, a: u64) -> u64 {
 /// The velocity for the next tick toward a target `d` sub-steps ahead, from `u` (positive =
 /// toward it), before the cap: the largest speed whose stopping distance fits `d`, moved at most
 /// `a` (≥ 1) from `u`. Needs |u| ≤ 2³¹; the result is within `u ± a`.
-fn toward(u: i64, d: u64, a: i64) -> i64 {
+///
+/// Under Kani it carries that as its contract (`toward_needs`, `toward_gives`, above):
+/// `control::verification` proves the contract for every input and the two harnesses of
+/// [`Trapezoid::step`] then use it in place of the body (`kani::stub_verified`), which spares them
+/// the multiplications and divisions of the stopping distances (their properties hold for any
+/// speed within `u ± a`).
+#[cfg_attr(kani, kani::requires(toward_needs(u, a)))]
+#[cfg_attr(kani, kani::ensures(|w: &i64| toward_gives(u, d, a, *w)))]
+pub(crate) fn toward(u: i64, d: u64, a: i64) -> i64 {
     let up = u.saturating_add(a);
     if up <= 0 {
         // Moving away at a or more: brake by a full step.

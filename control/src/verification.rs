@@ -12,7 +12,9 @@
 use crate::bridge::bridge_compare;
 use crate::kinematics::{DiffDrive, KinematicsError, Twist};
 use crate::pid::{AntiWindup, CurrentPi, Pid, PidGains};
-use crate::profile::{Position, ProfileLimits, Trapezoid, Travel};
+use crate::profile::{
+    toward, toward_gives, toward_needs, Position, ProfileLimits, Trapezoid, Travel,
+};
 use crate::rate::RateLimiter;
 use crate::sense::{adc_to_amps, SpeedEstimator};
 use crate::{within, Q};
@@ -485,6 +487,36 @@ pub fn profile_speed_within_cap(src: &mut impl Source) {
     );
 }
 
+/// INV-20: Profile, the velocity chooser (`profile::toward`, its contract): from any speed |u| ≤ 2³¹
+/// toward a target any distance ahead, with any `accel_step` 1 ≤ a < 2³¹, the speed chosen for the
+/// next tick is within u ± a, and 0 for an axis at rest on its target. The two harnesses of the
+/// step above use this contract in place of the function (`kani::stub_verified`): their properties
+/// hold for every speed within u ± a, so they need not solve the stopping distances.
+pub fn toward_within_a_step(src: &mut impl Source) {
+    let a = i64::from(src.i32());
+    let v = i64::from(src.i32());
+    let u = if src.bool() { v } else { v.wrapping_neg() };
+    let d = if src.bool() {
+        u64::from(src.u32()) << 32 | u64::from(src.u32())
+    } else {
+        u64::from(src.u16())
+    };
+    assume!(src, toward_needs(u, a));
+    let w = toward(u, d, a);
+    check!(
+        toward_gives(u, d, a, w),
+        "profile velocity chooser stays within accel_step of the speed, at rest on the target"
+    );
+    cover!(src, w == u + a && u > 0, "accelerating toward the target");
+    cover!(src, w == u - a && u > 0, "braking by a full step");
+    cover!(
+        src,
+        w > u - a && w < u + a && u > 0,
+        "a speed between the two"
+    );
+    cover!(src, u == 0 && d == 0, "at rest on the target");
+}
+
 /// P-20: Profile, nominal operation: from a valid state that can stop before the target and the travel
 /// limits ([`Trapezoid::can_stop`], the states the profile plans), a step toward the same target at
 /// any cap changes the velocity by at most `accel_step` unless the cap forces it (no abrupt stop on
@@ -579,13 +611,19 @@ mod proofs {
     }
     #[kani::proof]
     #[kani::unwind(2)]
+    #[kani::stub_verified(crate::profile::toward)]
     fn verify_profile_stays_within_travel() {
         super::profile_stays_within_travel(&mut KaniSource);
     }
     #[kani::proof]
     #[kani::unwind(2)]
+    #[kani::stub_verified(crate::profile::toward)]
     fn verify_profile_speed_within_cap() {
         super::profile_speed_within_cap(&mut KaniSource);
+    }
+    #[kani::proof_for_contract(crate::profile::toward)]
+    fn verify_toward_within_a_step() {
+        super::toward_within_a_step(&mut KaniSource);
     }
     // Pending: the induction multiplies unknowns (a stopping distance is the product of the speed
     // and the speed over accel_step), and CBMC did not finish it in 7 minutes, nor in 6.5 with
@@ -635,6 +673,10 @@ mod twins {
     #[test]
     fn speed_estimator_total() {
         Twin::run(0xC0_07, CASES, super::speed_estimator_total).assert_covered(1);
+    }
+    #[test]
+    fn toward_within_a_step() {
+        Twin::run(0xC0_0E, CASES, super::toward_within_a_step).assert_covered(4);
     }
     #[test]
     fn profile_stays_within_travel() {
