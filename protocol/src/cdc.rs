@@ -681,7 +681,22 @@ impl StreamDecoder {
         let span = self.len.saturating_sub(self.first);
         let mut best = None;
         let mut bad_before_best = 0u32;
-        for length in MIN_FRAME_LEN..=self.len.min(MAX_FRAME_LEN) {
+        // Under the loop-contract proof of one `push` (`cdc::verify_stream_step`) this loop stands
+        // for any number of its passes, with any `bad_before_best` and any `best` but a framing
+        // error (a candidate's CRC and LEN are right): what `push` does next is total and keeps
+        // the decoder's bounds for every such value.
+        // (A half-open range that is never reversed: Kani's loop contracts take no inclusive
+        // range, nor one whose end is below its start.)
+        let end = self
+            .len
+            .min(MAX_FRAME_LEN)
+            .saturating_add(1)
+            .max(MIN_FRAME_LEN);
+        #[cfg_attr(
+            kani_loop_contracts,
+            kani::loop_invariant(!matches!(best, Some((_, Err(Error::Framing)))))
+        )]
+        for length in MIN_FRAME_LEN..end {
             if length > span {
                 break;
             }
@@ -747,7 +762,13 @@ impl StreamDecoder {
         let span = bytes.len().saturating_sub(self.first);
         // From the end back to `first`, as in `complete`; the last one found is the first.
         let mut live = bytes.len();
-        for back in 1..=bytes.len() {
+        // The first byte kept stays within the bytes held, fewer than a whole buffer before the
+        // end (`may_start` says yes only there): the loop contract of `cdc::verify_stream_step`.
+        #[cfg_attr(
+            kani_loop_contracts,
+            kani::loop_invariant(live <= bytes.len() && bytes.len() - live < MAX_FRAME_LEN)
+        )]
+        for back in 1..bytes.len().saturating_add(1) {
             if back > span {
                 break;
             }

@@ -28,6 +28,8 @@
 // exists only under `cfg(kani)` and allows it locally.
 #![cfg_attr(not(kani), forbid(unsafe_code))]
 #![cfg_attr(kani, deny(unsafe_code))]
+// Loop contracts are attributes on statements.
+#![cfg_attr(kani_loop_contracts, feature(stmt_expr_attributes, proc_macro_hygiene))]
 #![cfg_attr(
     test,
     allow(

@@ -718,7 +718,8 @@ fn sample_of(kind: u8) -> Message {
 /// Totality harnesses replace the CRC by `crc16::verification::model::any_checksum` (any value):
 /// their properties hold whatever the CRC returns, and `crc16::verify_checksum_total` proves the
 /// real one returns for every input. Round trips and bit flips use the real CRC. The stream
-/// decoder is total: `verify_stream_step` (pending) checks one `push` from any state, with `candidate_at`
+/// decoder is total: `verify_stream_step` checks one `push` from any state, its two scans by their
+/// loop contracts (built with `--cfg kani_loop_contracts`, `-Z loop-contracts`), with `candidate_at`
 /// replaced by [`model::candidate_at`] (any verdict), which `verify_candidate_at` proves, and
 /// `may_start` by [`model::may_start`], which `verify_may_start` proves, and `append` by
 /// [`model::append`], whose counts `verify_append` proves.
@@ -744,28 +745,26 @@ mod proofs {
         check_decode_frame_total(&mut KaniSource);
     }
 
-    /// `push`'s two scans run over up to the whole buffer: unwound to its length, each position
-    /// by the proven stand-ins of `candidate_at` and `may_start`, `append` by its proven counts.
-    /// Pending: not finished in 25 min (on a shared machine); the twin `stream_step` runs it, and
-    /// the stand-ins' harnesses are verified.
-    #[cfg_attr(kani_pending, kani::proof)]
-    #[cfg_attr(kani_pending, kani::unwind(263))]
+    /// `push`'s two scans run over up to the whole buffer. Each is replaced by its loop contract
+    /// (the invariants on the loops of `complete` and `advance`, checked here: they hold on entry
+    /// and after every pass), each position by the proven stand-ins of `candidate_at` and
+    /// `may_start`, `append` by its proven counts. Loop contracts apply to every harness that
+    /// runs the loops, so this one is compiled on its own with `--cfg kani_loop_contracts` and
+    /// `-Z loop-contracts` (`.ci/run`); unrolled to the buffer's length it did not finish in
+    /// 25 min.
+    #[cfg_attr(kani_loop_contracts, kani::proof)]
     #[cfg_attr(
-        kani_pending,
-        kani::stub(
-            crate::crc16::checksum,
-            crate::crc16::verification::model::any_checksum
-        )
-    )]
-    #[cfg_attr(
-        kani_pending,
+        kani_loop_contracts,
         kani::stub(StreamDecoder::candidate_at, super::model::candidate_at)
     )]
     #[cfg_attr(
-        kani_pending,
+        kani_loop_contracts,
         kani::stub(crate::cdc::may_start, super::model::may_start)
     )]
-    #[cfg_attr(kani_pending, kani::stub(StreamDecoder::append, super::model::append))]
+    #[cfg_attr(
+        kani_loop_contracts,
+        kani::stub(StreamDecoder::append, super::model::append)
+    )]
     fn verify_stream_step() {
         check_stream_step(&mut KaniSource);
     }
