@@ -584,9 +584,9 @@ fn arc_factors_match_the_closed_form_across_the_series_threshold() {
         1e-6f64, 1e-3, 9.99e-3, 1.001e-2, 0.1, 1.0, 3.0, -0.005, -2.0,
     ] {
         let (a, b) = arc_factors(th as f32);
-        let th32 = f64::from(th as f32);
-        near(a, th32.sin() / th32, 1e-7);
-        near(b, (1.0 - th32.cos()) / th32, 1e-7);
+        let (ea, eb) = exact_arc_factors(th as f32);
+        near(a, ea, 1e-7);
+        near(b, eb, 1e-7);
     }
     assert_eq!(arc_factors(0.0), (1.0, 0.0));
 }
