@@ -751,7 +751,9 @@ mod proofs {
     /// `may_start`, `append` by its proven counts. Loop contracts apply to every harness that
     /// runs the loops, so this one is compiled on its own with `--cfg kani_loop_contracts` and
     /// `-Z loop-contracts` (`.ci/run`); unrolled to the buffer's length it did not finish in
-    /// 25 min.
+    /// 25 min. `.ci/run` gives CBMC 8 object bits for it: the loop contracts are checked against
+    /// sets with one entry per possible object, and at Kani's default of 16 bits those sets made
+    /// the formula 130 times larger (`proofs/REPORT.md`, "Kani suite time").
     #[cfg_attr(kani_loop_contracts, kani::proof)]
     #[cfg_attr(
         kani_loop_contracts,
