@@ -836,11 +836,22 @@ mod proofs {
         verify_len_flip_status => 6
     );
 
-    /// encode → `decode_frame` with the real CRC, one harness per message kind.
+    /// encode → `decode_frame`, one harness per message kind, with the checksum as an uninterpreted
+    /// function (`model::uninterpreted_checksum`: any value, the same for the same bytes). The
+    /// property needs only that `encode` and `decode_frame` get the same value for the same covered
+    /// bytes, which holds for every pure function of the bytes, the real CRC among them;
+    /// `verify_checksum_total` proves the real one returns for every input, and the twins run it.
+    /// With the real CRC the solver had to prove two copies of the CRC circuit equal over the
+    /// symbolic payload, and its time depended on the order of the formula's variables: 60 s in one
+    /// clone of the repository, over 50 minutes in another.
     macro_rules! frame_round_trip_of {
         ($($name:ident => $kind:literal),+) => {$(
             #[kani::proof]
             #[kani::unwind(30)]
+            #[kani::stub(
+                crate::crc16::checksum,
+                crate::crc16::verification::model::uninterpreted_checksum
+            )]
             fn $name() {
                 let _ = check_frame_round_trip_of(&mut KaniSource, $kind);
             }
@@ -856,9 +867,14 @@ mod proofs {
         verify_round_trip_status => 6
     );
 
-    /// encode → stream decoder, byte by byte (real CRC), for PING, whose frame has no payload.
+    /// encode → stream decoder, byte by byte, for PING, whose frame has no payload; the checksum
+    /// uninterpreted, as in the frame round trips above.
     #[kani::proof]
     #[kani::unwind(30)]
+    #[kani::stub(
+        crate::crc16::checksum,
+        crate::crc16::verification::model::uninterpreted_checksum
+    )]
     fn verify_stream_round_trip_ping() {
         check_stream_round_trip_of(&mut KaniSource, 3);
     }
