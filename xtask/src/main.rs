@@ -42,6 +42,8 @@ struct Row {
     checks: Option<String>,
     covers: Option<String>,
     seconds: Option<f64>,
+    /// Kani stopped CBMC at `--harness-timeout`: no verdict either way.
+    timed_out: bool,
 }
 
 /// Reads the summary lines of one result file (the last occurrence of each wins).
@@ -61,6 +63,8 @@ fn parse(harness: &str, text: &str) -> Row {
             row.verified = Some(v == "SUCCESSFUL");
         } else if let Some(t) = line.strip_prefix("Verification Time: ") {
             row.seconds = t.trim_end_matches('s').parse().ok();
+        } else if line.starts_with("CBMC timed out") {
+            row.timed_out = true;
         }
     }
     row
@@ -73,6 +77,7 @@ fn table(rows: &[Row]) -> String {
     let mut total = 0.0;
     for r in rows {
         let result = match r.verified {
+            _ if r.timed_out => "**TIMED OUT**",
             Some(true) => "VERIFIED",
             Some(false) => "**FAILED**",
             None => "no result",
@@ -469,5 +474,11 @@ mod tests {
         assert!(table(&[failed]).contains("**FAILED**"));
         let cut = parse("c", "Checking harness c...\n");
         assert!(table(&[cut]).contains("no result"));
+        // What Kani 0.67 writes when `--harness-timeout` stops CBMC.
+        let slow = parse(
+            "s",
+            "Checking harness s...\n\nCBMC failed\nVERIFICATION:- FAILED\nCBMC timed out. You may want to rerun your proof with a larger timeout\n",
+        );
+        assert!(table(&[slow]).contains("| `s` | **TIMED OUT** |"));
     }
 }
