@@ -44,9 +44,10 @@
 //!
 //! Proved by Kani for every valid state and every target and cap (`verification`): the position
 //! stays within the travel and never passes the target; |v| ≤ cap; |Δv| ≤ `accel_step` except
-//! for the cap and the two stops above. That a planned state never meets those stops is checked
-//! by a test twin and the tests below (the induction over stopping distances multiplies unknowns,
-//! which the solver does not finish).
+//! for the cap and the two stops above. That a planned state never meets those stops (P-20) is
+//! proved by Kani with the stopping distance, the move and the velocity chooser by their lemmas,
+//! which `proofs/REPORT.md` ("P-20 by decomposition") proves in writing and the tests below check
+//! (the stopping distances multiply unknowns, which the solver does not finish).
 
 use crate::Q;
 use statemachine::Speed;
@@ -61,10 +62,18 @@ pub const TICK_HZ: u16 = 1000;
 /// sub-steps per tick.
 const SUB: i64 = TICK_HZ as i64;
 
-/// `x` in sub-steps: |x| ≤ 2³¹ steps, so |result| < 2⁴¹ and the multiply cannot wrap.
+/// The exact position `f` sub-steps above the Q16.16 step `p`, in sub-steps: |p| ≤ 2³¹ and
+/// `f` < 2¹⁶, so |result| < 2⁴² and neither operation can wrap. Every exact position is computed
+/// by this one expression (the step, the state's [`Trapezoid::exact`] and the harnesses), so the
+/// solver sees one term where two computations meet.
+pub(crate) const fn sub_steps(p: i32, f: u16) -> i64 {
+    (p as i64).wrapping_mul(SUB).wrapping_add(f as i64)
+}
+
+/// `x` in sub-steps.
 #[cfg(any(test, kani))]
 const fn sub(x: Position) -> i64 {
-    (x.to_bits() as i64).wrapping_mul(SUB)
+    sub_steps(x.to_bits(), 0)
 }
 
 /// The travel limits of an axis, rad.
@@ -165,7 +174,7 @@ impl Trapezoid {
     /// The exact position in sub-steps (< 2⁴¹ in magnitude: no wrap).
     #[cfg(any(test, kani))]
     pub(crate) const fn exact(&self) -> i64 {
-        sub(self.pos).wrapping_add(self.frac as i64)
+        sub_steps(self.pos.to_bits(), self.frac)
     }
 
     /// The state invariant: the limits are valid, the remainder is below [`TICK_HZ`] and the
@@ -192,56 +201,22 @@ impl Trapezoid {
             return self.pos;
         }
         let a = i64::from(lim.accel_step.to_bits());
-        let t = i64::from(lim.travel.clamp(target).to_bits());
-        let (lo, hi) = (
-            i64::from(lim.travel.lo.to_bits()),
-            i64::from(lim.travel.hi.to_bits()),
-        );
-        let (p, f) = (i64::from(self.pos.to_bits()), i64::from(self.frac));
+        let t = lim.travel.clamp(target).to_bits();
         let v = self.vel.to_bits();
 
-        // 1. Move by the velocity of the tick that just ended: v sub-steps = q steps and r
-        // sub-steps, |r| < SUB (a constant divisor: the division cannot fail). |p| ≤ 2³¹ and
-        // |q| < 2²²: no wrap.
-        let (q, r) = (
-            i64::from(v.wrapping_div(1000)),
-            i64::from(v.wrapping_rem(1000)),
+        // 1. Move by the velocity of the tick that just ended.
+        let (p2, f2, moving) = advance(
+            self.pos.to_bits(),
+            self.frac,
+            v,
+            t,
+            lim.travel.lo.to_bits(),
+            lim.travel.hi.to_bits(),
         );
-        let (mut p2, mut f2) = (p.wrapping_add(q), f.wrapping_add(r));
-        if f2 < 0 {
-            (p2, f2) = (p2.wrapping_sub(1), f2.wrapping_add(SUB));
-        } else if f2 >= SUB {
-            (p2, f2) = (p2.wrapping_add(1), f2.wrapping_sub(SUB));
-        }
-        // The bound ahead is the target if the axis is on its near side (or on it), else the
-        // travel limit. Reaching the target, or passing either, stops the axis there. (A state
-        // already beyond the limit, left by a narrower travel, stops where it is: no jump.)
-        let mut moving = i64::from(v);
-        if v > 0 {
-            if at_or_below(p, f, t) {
-                if p2 >= t {
-                    (p2, f2, moving) = (t, 0, 0);
-                }
-            } else if !at_or_below(p2, f2, hi) {
-                (p2, f2, moving) = if at_or_below(p, f, hi) {
-                    (hi, 0, 0)
-                } else {
-                    (p, f, 0)
-                };
-            }
-        } else if v < 0 {
-            if p >= t {
-                if at_or_below(p2, f2, t) {
-                    (p2, f2, moving) = (t, 0, 0);
-                }
-            } else if p2 < lo {
-                (p2, f2, moving) = if p >= lo { (lo, 0, 0) } else { (p, f, 0) };
-            }
-        }
 
         // 2. The velocity for the next tick, in the frame where the target is ahead:
         // |left| < 2³³·SUB < 2⁴³.
-        let left = t.wrapping_sub(p2).wrapping_mul(SUB).wrapping_sub(f2);
+        let left = sub_steps(t, 0).wrapping_sub(sub_steps(p2, f2));
         let w = if left >= 0 {
             toward(moving, left.unsigned_abs(), a)
         } else {
@@ -257,10 +232,9 @@ impl Trapezoid {
             w
         };
 
-        // From a valid state (p2, f2) lies between (p, f) and a bound in the travel, so p2 fits
-        // i32 and 0 ≤ f2 < SUB; |w| ≤ cap ≤ i32::MAX. None of the fallbacks is taken.
-        self.pos = Position::from_bits(i32::try_from(p2).unwrap_or(self.pos.to_bits()));
-        self.frac = u16::try_from(f2).unwrap_or(0);
+        // |w| ≤ cap ≤ i32::MAX: the fallback is never taken.
+        self.pos = Position::from_bits(p2);
+        self.frac = f2;
         self.vel = Speed::from_bits(i32::try_from(w).unwrap_or(0));
         self.pos
     }
@@ -274,25 +248,96 @@ impl Trapezoid {
         let goal = sub(lim.travel.clamp(target));
         let here = self.exact();
         let v = i64::from(self.vel.to_bits());
-        let room = if v > 0 {
-            if here <= goal {
-                goal.wrapping_sub(here)
+        // The distance to the goal, as the step computes it (its `left`): on the goal's side the
+        // room is its magnitude, beyond it the distance to the travel limit ahead.
+        let ahead = goal.wrapping_sub(here);
+        let (fits, room) = if v > 0 {
+            if ahead >= 0 {
+                (true, ahead.unsigned_abs())
             } else {
-                sub(lim.travel.hi).wrapping_sub(here)
+                let r = sub(lim.travel.hi).wrapping_sub(here);
+                (r >= 0, r.unsigned_abs())
             }
         } else if v < 0 {
-            if here >= goal {
-                here.wrapping_sub(goal)
+            if ahead <= 0 {
+                (true, ahead.unsigned_abs())
             } else {
-                here.wrapping_sub(sub(lim.travel.lo))
+                let r = here.wrapping_sub(sub(lim.travel.lo));
+                (r >= 0, r.unsigned_abs())
             }
         } else {
             return true;
         };
-        let s = v.unsigned_abs();
-        let (k, r) = (s.checked_div(a).unwrap_or(0), s.checked_rem(a).unwrap_or(0));
-        room >= 0 && stopping(k, r, a) <= room.unsigned_abs()
+        fits && stop_distance(v.unsigned_abs(), a) <= room
     }
+}
+
+/// The exact position `f` sub-steps above the step `p` (`0 ≤ f < SUB`, |p| ≤ 2³¹) moved by `v`
+/// sub-steps, as (step, sub-steps): v = q steps and r sub-steps with |r| < SUB (a constant divisor:
+/// the division cannot fail), then one carry brings the sub-steps back into `0 .. SUB`. |q| < 2²²:
+/// no wrap.
+pub(crate) fn moved(p: i64, f: i64, v: i32) -> (i64, i64) {
+    let (q, r) = (
+        i64::from(v.wrapping_div(1000)),
+        i64::from(v.wrapping_rem(1000)),
+    );
+    let (p2, f2) = (p.wrapping_add(q), f.wrapping_add(r));
+    if f2 < 0 {
+        (p2.wrapping_sub(1), f2.wrapping_add(SUB))
+    } else if f2 >= SUB {
+        (p2.wrapping_add(1), f2.wrapping_sub(SUB))
+    } else {
+        (p2, f2)
+    }
+}
+
+/// Step 1 of [`Trapezoid::step`], the move: from the exact position `f` sub-steps above the step
+/// `p` (`f` < [`TICK_HZ`]), by the velocity `v` of the tick that ended (v sub-steps), toward the
+/// target step `t` within the travel `lo ..= hi` (`lo ≤ t ≤ hi`). Returns the new position as
+/// (step, sub-steps) and the velocity that carried on: `v`, or 0 where the move stopped the axis.
+///
+/// In exact sub-steps, with e the position, g = `t`·1000 and the limits likewise: an axis on the
+/// near side of the target (or on it) that reaches or passes it stops on it; one beyond the target
+/// that passes the travel limit ahead stops on it, or where it is if it was already beyond it;
+/// otherwise it moves to e + v. `proofs/REPORT.md` ("P-20", lemma A) proves that statement of this
+/// body, the tests `advance_*` check it, and the harness of P-20 uses it in place of the body
+/// (`verification::stand_in::advance`).
+pub(crate) fn advance(p32: i32, f: u16, v: i32, t: i32, lo: i32, hi: i32) -> (i32, u16, i64) {
+    let (p, f) = (i64::from(p32), i64::from(f));
+    let (t, lo, hi) = (i64::from(t), i64::from(lo), i64::from(hi));
+    let (mut p2, mut f2) = moved(p, f, v);
+    // The bound ahead is the target if the axis is on its near side (or on it), else the travel
+    // limit. Reaching the target, or passing either, stops the axis there. (A state already
+    // beyond the limit, left by a narrower travel, stops where it is: no jump.)
+    let mut moving = i64::from(v);
+    if v > 0 {
+        if at_or_below(p, f, t) {
+            if p2 >= t {
+                (p2, f2, moving) = (t, 0, 0);
+            }
+        } else if !at_or_below(p2, f2, hi) {
+            (p2, f2, moving) = if at_or_below(p, f, hi) {
+                (hi, 0, 0)
+            } else {
+                (p, f, 0)
+            };
+        }
+    } else if v < 0 {
+        if p >= t {
+            if at_or_below(p2, f2, t) {
+                (p2, f2, moving) = (t, 0, 0);
+            }
+        } else if p2 < lo {
+            (p2, f2, moving) = if p >= lo { (lo, 0, 0) } else { (p, f, 0) };
+        }
+    }
+    // (p2, f2) lies between (p, f) and a bound, so p2 fits i32 and 0 ≤ f2 < SUB: neither
+    // fallback is taken.
+    (
+        i32::try_from(p2).unwrap_or(p32),
+        u16::try_from(f2).unwrap_or(0),
+        moving,
+    )
 }
 
 /// What [`toward`] needs: `1 ≤ a < 2³¹` (an `accel_step` of a valid [`ProfileLimits`]) and
@@ -311,10 +356,21 @@ pub(crate) const fn toward_gives(u: i64, d: u64, a: i64, w: i64) -> bool {
 
 /// The stopping distance, in sub-steps, of the speed v = k·a + r (0 ≤ r < a, in sub-steps per
 /// tick) falling by `a` per tick: v + (v − a) + … + r = (k + 1)(v + r)/2 (the product is even).
-/// With v ≤ 2³² and a ≥ 1 it stays below 2⁶³, so the saturating operations never saturate.
+/// With v ≤ 2³¹ and a ≥ 1 the product stays below 2⁶³ (`proofs/REPORT.md`, "P-20"), so the
+/// saturating operations never saturate.
 fn stopping(k: u64, r: u64, a: u64) -> u64 {
     let v = k.saturating_mul(a).saturating_add(r);
     k.saturating_add(1).saturating_mul(v.saturating_add(r)) >> 1
+}
+
+/// The stopping distance of the speed `v` (sub-steps per tick) falling by `a` (≥ 1) per tick,
+/// S(v) = v + (v − a) + (v − 2a) + … over the terms that are not negative; exact for v ≤ 2³¹.
+/// Under Kani the harness of P-20 puts an uninterpreted function in its place
+/// (`verification::stand_in::stop_distance`).
+#[cfg(any(test, kani))]
+pub(crate) fn stop_distance(v: u64, a: u64) -> u64 {
+    let (k, r) = (v.checked_div(a).unwrap_or(0), v.checked_rem(a).unwrap_or(0));
+    stopping(k, r, a)
 }
 
 /// The velocity for the next tick toward a target `d` sub-steps ahead, from `u` (positive =
@@ -338,6 +394,17 @@ pub(crate) fn toward(u: i64, d: u64, a: i64) -> i64 {
         // 0 < up < a: a speed below a stops within one tick, so its stopping distance is itself.
         return up.min(i64::try_from(d).unwrap_or(i64::MAX));
     }
+    toward_ahead(u, d, a)
+}
+
+/// [`toward`] for `u` ≥ 0 (moving toward the target, or at rest): the largest speed x with
+/// S(x) ≤ `d`, limited to `u ± a`. Needs `0 ≤ u ≤ 2³¹` and `1 ≤ a < 2³¹`. If S(max(u − a, 0)) ≤ `d`
+/// (the axis could stop in time, braking by at most `a`), the result w lies in
+/// [max(u − a, 0), u + a] and S(w) ≤ `d`: the lemma `proofs/REPORT.md` ("P-20") proves in writing,
+/// the tests `toward_ahead_*` check, and the harness of P-20 uses in place of this body
+/// (`verification::stand_in::toward_ahead`).
+pub(crate) fn toward_ahead(u: i64, d: u64, a: i64) -> i64 {
+    let up = u.saturating_add(a);
     let (ua, aa) = (u.unsigned_abs(), a.unsigned_abs());
     // u = k·a + r; u ± a have the same r and k ± 1. S(x) is the stopping distance of x.
     let (k, r) = (
@@ -780,6 +847,302 @@ mod tests {
                 p.step(q(target), q(cap), &l);
                 let dv = (p.velocity() - v0).abs();
                 assert!(dv <= q(0.007) || p.velocity().abs() == q(cap));
+            }
+        }
+    }
+
+    // The lemmas of P-20 (`proofs/REPORT.md`, "P-20"), which the harness of P-20 takes as given
+    // (`verification::stand_in`): checked against references written apart from the code.
+
+    /// S(v) by its definition: the sum of v, v − a, v − 2a, … while the terms are not negative.
+    fn sum_of_terms(v: u64, a: u64) -> u64 {
+        let mut total = 0;
+        let mut term = v;
+        loop {
+            total += term;
+            if term < a {
+                return total;
+            }
+            term -= a;
+        }
+    }
+
+    /// S(v) in exact 128-bit arithmetic by a second closed form: with k = ⌊v/a⌋,
+    /// S(v) = (k + 1)·v − a·k·(k + 1)/2.
+    fn closed_form(v: u64, a: u64) -> u128 {
+        let (v, a) = (u128::from(v), u128::from(a));
+        let k = v / a;
+        (k + 1) * v - a * k * (k + 1) / 2
+    }
+
+    fn lcg(seed: &mut u64) -> u64 {
+        *seed = seed
+            .wrapping_mul(6_364_136_223_846_793_005)
+            .wrapping_add(1_442_695_040_888_963_407);
+        *seed >> 11
+    }
+
+    /// Speeds and steps at the ends of the domain: 0, 1, 2, the largest speed 2³¹ and its
+    /// neighbours, and steps that divide them or do not.
+    const EDGES: [u64; 10] = [
+        0,
+        1,
+        2,
+        3,
+        (1 << 16) - 1,
+        1 << 16,
+        (1 << 30) + 1,
+        (1 << 31) - 2,
+        (1 << 31) - 1,
+        1 << 31,
+    ];
+
+    #[test]
+    fn stop_distance_is_its_sum_on_small_speeds() {
+        // Every speed up to 3000 for every step up to 48: the code, the sum and L1–L4; L5 for
+        // every pair of speeds up to 400.
+        for a in 1..=48u64 {
+            for v in 0..=3000u64 {
+                let s = stop_distance(v, a);
+                assert_eq!(s, sum_of_terms(v, a), "S({v}) for a = {a}");
+                if v <= a {
+                    assert_eq!(s, v, "L1 at v = {v}, a = {a}");
+                } else {
+                    assert_eq!(s, v + stop_distance(v - a, a), "L2 at v = {v}, a = {a}");
+                    assert!(s + a >= 2 * v, "L4 at v = {v}, a = {a}");
+                }
+                if v == a {
+                    assert_eq!(s, v + stop_distance(0, a), "L2 at v = a = {a}");
+                }
+                assert!(stop_distance(v + 1, a) >= s, "L3 at v = {v}, a = {a}");
+                if v <= 400 {
+                    for w in 0..=v.saturating_sub(a) {
+                        if w + a <= v {
+                            assert!(s >= v + stop_distance(w, a), "L5 at {v}, {w}, a = {a}");
+                        }
+                    }
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn stop_distance_is_exact_up_to_2_31() {
+        // The ends of the domain, then a million random pairs, against the 128-bit closed form:
+        // no saturation anywhere in v ≤ 2³¹, 1 ≤ a < 2³¹.
+        let mut pairs = Vec::new();
+        for &v in &EDGES {
+            for &a in EDGES.iter().chain(&[v.saturating_sub(1), v + 1]) {
+                if (1..1 << 31).contains(&a) {
+                    pairs.push((v, a));
+                }
+            }
+        }
+        let mut seed = 0x5EED_0020;
+        for i in 0..1_000_000u64 {
+            let v = lcg(&mut seed) % ((1 << 31) + 1);
+            // Steps of every size: a few bits half the time.
+            let bits = if i % 2 == 0 {
+                1 + lcg(&mut seed) % 31
+            } else {
+                31
+            };
+            let a = 1 + lcg(&mut seed) % ((1 << bits) - 1);
+            pairs.push((v, a));
+        }
+        for (v, a) in pairs {
+            let s = stop_distance(v, a);
+            assert_eq!(u128::from(s), closed_form(v, a), "S({v}) for a = {a}");
+            assert!(s < 1 << 63, "S({v}) for a = {a} stays below 2^63");
+        }
+        // The largest: a = 1, v = 2³¹.
+        assert_eq!(stop_distance(1 << 31, 1), (1 << 61) + (1 << 30));
+    }
+
+    /// The lemma of `toward_ahead` at one point, with S computed by `s` (a reference): within
+    /// [max(u − a, 0), u + a], S(w) ≤ d, and the largest such speed.
+    fn check_toward_ahead(u: u64, d: u64, a: u64, s: impl Fn(u64) -> u128) {
+        let w = toward_ahead(u as i64, d, a as i64);
+        let low = u.saturating_sub(a);
+        assert!(w >= 0, "u = {u}, d = {d}, a = {a}: w = {w}");
+        let w = w as u64;
+        assert!(w >= low && w <= u + a, "u = {u}, d = {d}, a = {a}: w = {w}");
+        assert!(
+            s(w) <= u128::from(d),
+            "u = {u}, d = {d}, a = {a}: S({w}) > d"
+        );
+        assert!(
+            w == u + a || s(w + 1) > u128::from(d),
+            "u = {u}, d = {d}, a = {a}: {w} is not the largest"
+        );
+    }
+
+    #[test]
+    fn toward_ahead_lemma_on_small_axes() {
+        // Every step up to 12, every speed up to 150, every distance from the least the lemma
+        // allows (S(max(u − a, 0))) to past S(u + a): the whole range where the answer changes.
+        for a in 1..=12u64 {
+            for u in 0..=150u64 {
+                let from = sum_of_terms(u.saturating_sub(a), a);
+                for d in from..=sum_of_terms(u + a, a) + a + 2 {
+                    check_toward_ahead(u, d, a, |x| u128::from(sum_of_terms(x, a)));
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn toward_ahead_lemma_at_full_range() {
+        // Speeds up to 2³¹ and steps up to 2³¹ − 1, at the ends and at random, with distances at
+        // and around S(x) for x across [max(u − a, 0), u + a]: against the 128-bit closed form.
+        let mut cases = Vec::new();
+        for &u in &EDGES {
+            for &a in &EDGES {
+                if (1..1 << 31).contains(&a) {
+                    cases.push((u, a));
+                }
+            }
+        }
+        let mut seed = 0x5EED_7041;
+        for i in 0..200_000u64 {
+            let u = lcg(&mut seed) % ((1 << 31) + 1);
+            let bits = if i % 2 == 0 {
+                1 + lcg(&mut seed) % 31
+            } else {
+                31
+            };
+            let a = 1 + lcg(&mut seed) % ((1 << bits) - 1);
+            cases.push((u, a));
+        }
+        for (n, (u, a)) in cases.into_iter().enumerate() {
+            let s = |x: u64| closed_form(x, a);
+            let low = u.saturating_sub(a);
+            let span = u + a - low;
+            let mut picks = [low, u, u + a, low + span / 2, 0];
+            picks[4] = low + lcg(&mut seed) % (span + 1);
+            for (i, &x) in picks.iter().enumerate() {
+                let at = s(x);
+                for delta in [-1i128, 0, 1, (n + i) as i128 % 97] {
+                    let d = at as i128 + delta;
+                    if d >= s(low) as i128 && d <= u64::MAX as i128 {
+                        check_toward_ahead(u, d as u64, a, s);
+                    }
+                }
+            }
+        }
+    }
+
+    /// The move of lemma A by its statement, in exact 128-bit sub-steps: (the new exact
+    /// position, the velocity that carried on).
+    fn move_by_statement(p: i32, f: u16, v: i32, t: i32, lo: i32, hi: i32) -> (i128, i64) {
+        let x = |step: i32| i128::from(step) * 1000;
+        let (e, g, low, high) = (x(p) + i128::from(f), x(t), x(lo), x(hi));
+        let e1 = e + i128::from(v);
+        let v = i64::from(v);
+        if v > 0 && e <= g {
+            if e1 >= g {
+                (g, 0)
+            } else {
+                (e1, v)
+            }
+        } else if v > 0 {
+            if e1 <= high {
+                (e1, v)
+            } else if e <= high {
+                (high, 0)
+            } else {
+                (e, 0)
+            }
+        } else if v < 0 && e >= g {
+            if e1 <= g {
+                (g, 0)
+            } else {
+                (e1, v)
+            }
+        } else if v < 0 {
+            if e1 >= low {
+                (e1, v)
+            } else if e >= low {
+                (low, 0)
+            } else {
+                (e, 0)
+            }
+        } else {
+            (e, 0)
+        }
+    }
+
+    fn check_advance(p: i32, f: u16, v: i32, t: i32, lo: i32, hi: i32) {
+        let (p2, f2, moving) = advance(p, f, v, t, lo, hi);
+        let (e2, carried) = move_by_statement(p, f, v, t, lo, hi);
+        let case = (p, f, v, t, lo, hi);
+        assert!(f2 < 1000, "{case:?}: remainder {f2}");
+        assert_eq!(
+            i128::from(sub_steps(p2, f2)),
+            e2,
+            "{case:?}: exact position"
+        );
+        assert_eq!(moving, carried, "{case:?}: velocity carried on");
+    }
+
+    #[test]
+    fn advance_is_its_statement_on_small_travels() {
+        // Every travel and target within ±3 steps, every start within ±4 steps (outside the
+        // travel too) at five remainders, every speed within ±5000 sub-steps per tick.
+        for lo in -3..=3 {
+            for hi in lo + 1..=3 {
+                for t in lo..=hi {
+                    for p in -4..=4 {
+                        for f in [0, 1, 500, 998, 999] {
+                            for v in -5000..=5000 {
+                                check_advance(p, f, v, t, lo, hi);
+                            }
+                        }
+                    }
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn advance_is_its_statement_at_full_range() {
+        // The ends of i32 for the position, the bounds and the speed, then two million random
+        // cases, many of them with the start, the target and the bounds a few steps apart.
+        let ends = [i32::MIN, i32::MIN + 1, -1, 0, 1, i32::MAX - 1, i32::MAX];
+        for &p in &ends {
+            for &v in &ends {
+                for &lo in &ends {
+                    for &hi in &ends {
+                        if lo < hi {
+                            for t in [lo, hi, lo / 2 + hi / 2] {
+                                for f in [0, 999] {
+                                    check_advance(p, f, v, t, lo, hi);
+                                }
+                            }
+                        }
+                    }
+                }
+            }
+        }
+        let mut seed = 0x5EED_00A0;
+        let mut any = |near: i32| {
+            let r = lcg(&mut seed);
+            if r.is_multiple_of(2) {
+                r as i32
+            } else {
+                near.wrapping_add((r >> 32) as i32 % 8)
+            }
+        };
+        for _ in 0..2_000_000 {
+            let lo = any(0);
+            let hi = any(lo);
+            let t = any(lo);
+            let p = any(t);
+            let v = any(0);
+            let f = (any(0) as u32 % 1000) as u16;
+            let (lo, hi) = (lo.min(hi), lo.max(hi));
+            if lo < hi {
+                check_advance(p, f, v, t.clamp(lo, hi), lo, hi);
             }
         }
     }

@@ -6,8 +6,9 @@
 //! bridge mapping and speed estimation never panic or overflow, and the bridge never drives both
 //! high sides; the position profile keeps the axis within its travel and never past its target,
 //! its speed within the cap, and its velocity change within `accel_step` except where the cap or
-//! a stop on the target or a limit forces it (and, checked by a twin only, no such stop from a
-//! state the profile planned for the same target).
+//! a stop on the target or a limit forces it, and no such stop from a state the profile planned
+//! for the same target (with the stopping distance, the move and the velocity chooser by the
+//! lemmas `proofs/REPORT.md` proves in writing: `stand_in`).
 
 use crate::bridge::bridge_compare;
 use crate::kinematics::{DiffDrive, KinematicsError, Twist};
@@ -564,6 +565,216 @@ pub fn profile_smooth_for_fixed_target(src: &mut impl Source) {
     );
 }
 
+/// The stand-ins of P-20's harness: the stopping distance S as an uninterpreted function that keeps
+/// the facts `proofs/REPORT.md` ("P-20") proves of the real one, and `toward_ahead` by its lemma.
+/// A property proven with them holds for every function with those facts, so for the real ones.
+///
+/// The facts of S, for speeds v, v' (sub-steps per tick) and one `accel_step` a ≥ 1:
+/// - L1: S(v) = v for v ≤ a;
+/// - L2: S(v) = v + S(v − a) for v ≥ a;
+/// - L3: S is monotone;
+/// - L4: S(v) ≥ 2v − a for v ≥ a (from L2 and S(v − a) ≥ v − a);
+/// - L5: S(v) ≥ v + S(v') for v' + a ≤ v (from L2 and L3): the stopping distance left after one
+///   tick at v covers any speed a full step or more below it.
+///
+/// The stand-in checks the domain of each use: the real `stop_distance` is exact for v ≤ 2³¹, the
+/// facts are proven for v ≤ 2³², `toward_ahead`'s lemma needs S(max(u − a, 0)) ≤ d.
+#[cfg(kani)]
+pub(crate) mod stand_in {
+    use crate::profile::{moved, toward_needs};
+    use statemachine::check;
+
+    /// How many points the harness asks about: S(v) before the step, S(max(u − a, 0)) and S(w)
+    /// in `toward_ahead`, S(v') after it.
+    const POINTS: usize = 4;
+
+    /// The points asked so far: (v, a, S(v)).
+    static mut ASKED: [Option<(u64, u64, u64)>; POINTS] = [None; POINTS];
+
+    /// Any value for S(v) consistent with the facts L1–L4 and with every point asked before.
+    #[allow(unsafe_code)]
+    fn uninterpreted(v: u64, a: u64) -> u64 {
+        check!(
+            a >= 1 && a <= i32::MAX as u64 && v <= 1 << 32,
+            "P-20: the stopping distance is asked only where its facts are proven"
+        );
+        // SAFETY: Kani runs a harness on one thread, from a fresh program state each time; no
+        // reference to the static outlives this call.
+        let asked = unsafe { &mut *core::ptr::addr_of_mut!(ASKED) };
+        let s: u64 = kani::any();
+        // L1; L4 (the bounds keep 2v − a within u64).
+        if v <= a {
+            kani::assume(s == v);
+        } else {
+            kani::assume(s >= v.wrapping_mul(2).wrapping_sub(a));
+        }
+        let mut free = None;
+        for (i, slot) in asked.iter().enumerate() {
+            match *slot {
+                Some((v2, a2, s2)) if a2 == a => {
+                    // The same point, L3, L2 and L5 in both directions.
+                    kani::assume(v != v2 || s == s2);
+                    kani::assume(v >= v2 || s <= s2);
+                    kani::assume(v <= v2 || s >= s2);
+                    kani::assume(v != v2.wrapping_add(a) || s == v.wrapping_add(s2));
+                    kani::assume(v2 != v.wrapping_add(a) || s2 == v2.wrapping_add(s));
+                    kani::assume(v < v2.wrapping_add(a) || s >= v.wrapping_add(s2));
+                    kani::assume(v2 < v.wrapping_add(a) || s2 >= v2.wrapping_add(s));
+                }
+                Some(_) => {}
+                None => {
+                    if free.is_none() {
+                        free = Some(i);
+                    }
+                }
+            }
+        }
+        match free.and_then(|i| asked.get_mut(i)) {
+            Some(slot) => *slot = Some((v, a, s)),
+            None => check!(
+                false,
+                "P-20: the stopping-distance stand-in remembers every point asked"
+            ),
+        }
+        s
+    }
+
+    /// Stands for `profile::advance` by lemma A: the move as its statement, in exact sub-steps
+    /// (every exact position by `sub_steps`, the one expression the step and the state's `exact`
+    /// use). A stop returns the bound's or the start's own (step, sub-steps); a free move returns
+    /// `profile::moved`'s pair, which lemma A proves exact (assumed here: the solver cannot link
+    /// the division by 1000 with the multiplications).
+    pub(crate) fn advance(p: i32, f: u16, v: i32, t: i32, lo: i32, hi: i32) -> (i32, u16, i64) {
+        check!(
+            u64::from(f) < 1000 && lo <= t && t <= hi,
+            "P-20: the move is asked about a remainder below a step and a target within the travel"
+        );
+        let (e, g) = (sub_steps(p, f), sub_steps(t, 0));
+        let (low, high) = (sub_steps(lo, 0), sub_steps(hi, 0));
+        let e1 = e.wrapping_add(i64::from(v));
+        let (q2, r2) = moved(i64::from(p), i64::from(f), v);
+        let free = (
+            i32::try_from(q2).unwrap_or(p),
+            u16::try_from(r2).unwrap_or(0),
+        );
+        // Where the move is free lemma A proves the pair exact, in range and below a step.
+        let stop = |at: (i32, u16)| (at.0, at.1, 0);
+        let go = || {
+            let e2 = sub_steps(free.0, free.1);
+            kani::assume(i64::from(free.0) == q2 && i64::from(free.1) == r2);
+            kani::assume(r2 < 1000 && e2 == e1);
+            // Three identities of wrapping arithmetic, true of every value, in the terms the step
+            // and `can_stop` compute: the room left after the move is the room before less v.
+            let v = i64::from(v);
+            kani::assume(g.wrapping_sub(e2) == g.wrapping_sub(e).wrapping_sub(v));
+            kani::assume(high.wrapping_sub(e2) == high.wrapping_sub(e).wrapping_sub(v));
+            kani::assume(e2.wrapping_sub(low) == e.wrapping_sub(low).wrapping_add(v));
+            (free.0, free.1, v)
+        };
+        if v > 0 {
+            if e <= g {
+                if e1 >= g {
+                    stop((t, 0))
+                } else {
+                    go()
+                }
+            } else if e1 > high {
+                stop(if e <= high { (hi, 0) } else { (p, f) })
+            } else {
+                go()
+            }
+        } else if v < 0 {
+            if e >= g {
+                if e1 <= g {
+                    stop((t, 0))
+                } else {
+                    go()
+                }
+            } else if e1 < low {
+                stop(if e >= low { (lo, 0) } else { (p, f) })
+            } else {
+                go()
+            }
+        } else {
+            stop((p, f))
+        }
+    }
+
+    /// How many exact positions the harness of P-20 computes: the start and the target in
+    /// `profile_case`, three in each `can_stop`, five in the move, two in the step, three in the
+    /// property.
+    const POSITIONS: usize = 18;
+
+    /// The exact positions asked so far: (step, sub-steps, sub-steps in all).
+    static mut PLACED: [Option<(i32, u16, i64)>; POSITIONS] = [None; POSITIONS];
+
+    /// Stands for `profile::sub_steps` (1000·p + f): an uninterpreted function of the pair. The
+    /// same pair gives the same value, so the step, the state's `exact` and `can_stop` meet on one
+    /// value (CaDiCaL could not show two multiplications by 1000 of equal inputs equal, lacking
+    /// congruence closure), and every value is below 2⁴² in magnitude. Both hold of 1000·p + f
+    /// for `f` < 1000; the step needs nothing else of it.
+    #[allow(unsafe_code)]
+    pub(crate) fn sub_steps(p: i32, f: u16) -> i64 {
+        check!(
+            f < 1000,
+            "P-20: an exact position is asked only for a remainder below a step"
+        );
+        // SAFETY: as in `uninterpreted`.
+        let placed = unsafe { &mut *core::ptr::addr_of_mut!(PLACED) };
+        let x: i64 = kani::any();
+        kani::assume(x.unsigned_abs() < 1 << 42);
+        let mut free = None;
+        for (i, slot) in placed.iter().enumerate() {
+            match *slot {
+                Some((p2, f2, x2)) => {
+                    kani::assume(p != p2 || f != f2 || x == x2);
+                }
+                None => {
+                    if free.is_none() {
+                        free = Some(i);
+                    }
+                }
+            }
+        }
+        match free.and_then(|i| placed.get_mut(i)) {
+            Some(slot) => *slot = Some((p, f, x)),
+            None => check!(
+                false,
+                "P-20: the exact-position stand-in remembers every position asked"
+            ),
+        }
+        x
+    }
+
+    /// Stands for `profile::stop_distance`, which is exact (equal to S) for v ≤ 2³¹.
+    pub(crate) fn stop_distance(v: u64, a: u64) -> u64 {
+        check!(
+            v <= 1 << 31,
+            "P-20: the stopping distance is computed only for a speed it is exact for"
+        );
+        uninterpreted(v, a)
+    }
+
+    /// Stands for `profile::toward_ahead` by its lemma: for 0 ≤ u ≤ 2³¹, 1 ≤ a < 2³¹ and
+    /// S(max(u − a, 0)) ≤ d, any w in [max(u − a, 0), u + a] with S(w) ≤ d.
+    pub(crate) fn toward_ahead(u: i64, d: u64, a: i64) -> i64 {
+        check!(
+            u >= 0 && toward_needs(u, a),
+            "P-20: toward_ahead is asked about a speed toward the target, within its domain"
+        );
+        let (ua, aa) = (u.unsigned_abs(), a.unsigned_abs());
+        let low = ua.saturating_sub(aa);
+        check!(
+            uninterpreted(low, aa) <= d,
+            "P-20: toward_ahead is asked only where braking by accel_step still stops in time"
+        );
+        let w: u64 = kani::any();
+        kani::assume(w >= low && w <= ua.saturating_add(aa));
+        kani::assume(uninterpreted(w, aa) <= d);
+        i64::try_from(w).unwrap_or(i64::MAX)
+    }
+}
+
 #[cfg(kani)]
 #[allow(dead_code)]
 mod proofs {
@@ -625,12 +836,16 @@ mod proofs {
     fn verify_toward_within_a_step() {
         super::toward_within_a_step(&mut KaniSource);
     }
-    // Pending: the induction multiplies unknowns (a stopping distance is the product of the speed
-    // and the speed over accel_step), and CBMC did not finish it in 7 minutes, nor in 6.5 with
-    // |v|, accel_step ≤ 4096 steps/s and a ±1024-step travel assumed. The twin checks it on
-    // 500 000 cases, the test `profile::tests::random_commands_keep_every_bound` on long runs.
-    #[cfg_attr(kani_pending, kani::proof)]
-    #[cfg_attr(kani_pending, kani::unwind(2))]
+    // The stopping distances multiply unknowns (the speed by the speed over accel_step), which
+    // CBMC did not finish in 15 minutes. The harness takes S uninterpreted with the facts the step
+    // needs, and `toward_ahead` by its lemma (`stand_in`); REPORT.md ("P-20") proves those of the
+    // real functions in writing and the tests `stop_distance_*` and `toward_ahead_*` check them.
+    #[kani::proof]
+    #[kani::unwind(19)]
+    #[kani::stub(crate::profile::stop_distance, super::stand_in::stop_distance)]
+    #[kani::stub(crate::profile::toward_ahead, super::stand_in::toward_ahead)]
+    #[kani::stub(crate::profile::advance, super::stand_in::advance)]
+    #[kani::stub(crate::profile::sub_steps, super::stand_in::sub_steps)]
     fn verify_profile_smooth_for_fixed_target() {
         super::profile_smooth_for_fixed_target(&mut KaniSource);
     }
@@ -688,8 +903,8 @@ mod twins {
     }
     #[test]
     fn profile_smooth_for_fixed_target() {
-        // Ten times the cases: a test is all that checks this property (its proof is pending),
-        // and only one case in twenty passes the assumptions.
+        // Ten times the cases: the proof rests on lemmas proven in writing, and only one case in
+        // twenty passes the assumptions.
         Twin::run(0xC0_0D, CASES * 10, super::profile_smooth_for_fixed_target).assert_covered(3);
     }
 }

@@ -14,9 +14,7 @@
 //!
 //! Every decoder is total: for every input it returns `Ok` or a typed error. The harnesses in each
 //! module's `verification` submodule state this (and round-trips, and bit-flip detection); each is a
-//! Kani proof and a `cargo test` twin. A few harnesses do not finish under Kani yet and are compiled
-//! as proofs only with `--cfg kani_pending`; `proofs/REPORT.md` lists them and what proves their
-//! claims instead. `tests/fuzz.rs` fuzzes every decoder with bolero.
+//! Kani proof and a `cargo test` twin. `tests/fuzz.rs` fuzzes every decoder with bolero.
 //!
 //! Feature `serde` (no_std, no alloc) derives `Serialize`/`Deserialize` on the plain message structs
 //! (missing fields default to zero, unknown fields are refused); the host tools use it for JSON.

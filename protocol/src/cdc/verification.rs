@@ -727,8 +727,7 @@ fn sample_of(kind: u8) -> Message {
 /// before a PING or an ESTOP frame, with the CRC computed by the seeds' bitwise loop
 /// (`crc16::verification::seed_loop`, the same function as `checksum`, which the test
 /// `seed_loop_is_checksum` compares at every frame length; the block folding over slices of
-/// many possible lengths multiplied the formula). Those under `cfg_attr(kani_pending, …)` do not
-/// finish yet and run as `cargo test` twins.
+/// many possible lengths multiplied the formula).
 #[cfg(kani)]
 #[allow(dead_code)]
 mod proofs {
