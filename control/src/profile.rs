@@ -882,6 +882,17 @@ mod tests {
         *seed >> 11
     }
 
+    /// A random speed up to 2³¹ and step below 2³¹, the step of a few bits when `i` is even.
+    fn speed_and_step(seed: &mut u64, i: u64) -> (u64, u64) {
+        let v = lcg(seed) % ((1 << 31) + 1);
+        let bits = if i.is_multiple_of(2) {
+            1 + lcg(seed) % 31
+        } else {
+            31
+        };
+        (v, 1 + lcg(seed) % ((1 << bits) - 1))
+    }
+
     /// Speeds and steps at the ends of the domain: 0, 1, 2, the largest speed 2³¹ and its
     /// neighbours, and steps that divide them or do not.
     const EDGES: [u64; 10] = [
@@ -940,15 +951,7 @@ mod tests {
         }
         let mut seed = 0x5EED_0020;
         for i in 0..1_000_000u64 {
-            let v = lcg(&mut seed) % ((1 << 31) + 1);
-            // Steps of every size: a few bits half the time.
-            let bits = if i % 2 == 0 {
-                1 + lcg(&mut seed) % 31
-            } else {
-                31
-            };
-            let a = 1 + lcg(&mut seed) % ((1 << bits) - 1);
-            pairs.push((v, a));
+            pairs.push(speed_and_step(&mut seed, i));
         }
         for (v, a) in pairs {
             let s = stop_distance(v, a);
@@ -1005,14 +1008,7 @@ mod tests {
         }
         let mut seed = 0x5EED_7041;
         for i in 0..200_000u64 {
-            let u = lcg(&mut seed) % ((1 << 31) + 1);
-            let bits = if i % 2 == 0 {
-                1 + lcg(&mut seed) % 31
-            } else {
-                31
-            };
-            let a = 1 + lcg(&mut seed) % ((1 << bits) - 1);
-            cases.push((u, a));
+            cases.push(speed_and_step(&mut seed, i));
         }
         for (n, (u, a)) in cases.into_iter().enumerate() {
             let s = |x: u64| closed_form(x, a);
