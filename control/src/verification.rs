@@ -591,18 +591,7 @@ pub(crate) mod stand_in {
     /// The points asked so far: (v, a, S(v)).
     static mut ASKED: [Option<(u64, u64, u64)>; POINTS] = [None; POINTS];
 
-    /// Puts `entry` in the first free slot of `table`; false if every slot is taken.
-    fn remember<T>(table: &mut [Option<T>], entry: T) -> bool {
-        match table.iter_mut().find(|slot| slot.is_none()) {
-            Some(slot) => {
-                *slot = Some(entry);
-                true
-            }
-            None => false,
-        }
-    }
-
-    /// Any value for S(v) consistent with the facts L1–L5 and with every point asked before.
+    /// Any value for S(v) consistent with the facts L1–L4 and with every point asked before.
     #[allow(unsafe_code)]
     fn uninterpreted(v: u64, a: u64) -> u64 {
         check!(
@@ -619,22 +608,34 @@ pub(crate) mod stand_in {
         } else {
             kani::assume(s >= v.wrapping_mul(2).wrapping_sub(a));
         }
-        for &(v2, a2, s2) in asked.iter().flatten() {
-            if a2 == a {
-                // The same point, L3, L2 and L5 in both directions.
-                kani::assume(v != v2 || s == s2);
-                kani::assume(v >= v2 || s <= s2);
-                kani::assume(v <= v2 || s >= s2);
-                kani::assume(v != v2.wrapping_add(a) || s == v.wrapping_add(s2));
-                kani::assume(v2 != v.wrapping_add(a) || s2 == v2.wrapping_add(s));
-                kani::assume(v < v2.wrapping_add(a) || s >= v.wrapping_add(s2));
-                kani::assume(v2 < v.wrapping_add(a) || s2 >= v2.wrapping_add(s));
+        let mut free = None;
+        for (i, slot) in asked.iter().enumerate() {
+            match *slot {
+                Some((v2, a2, s2)) if a2 == a => {
+                    // The same point, L3, L2 and L5 in both directions.
+                    kani::assume(v != v2 || s == s2);
+                    kani::assume(v >= v2 || s <= s2);
+                    kani::assume(v <= v2 || s >= s2);
+                    kani::assume(v != v2.wrapping_add(a) || s == v.wrapping_add(s2));
+                    kani::assume(v2 != v.wrapping_add(a) || s2 == v2.wrapping_add(s));
+                    kani::assume(v < v2.wrapping_add(a) || s >= v.wrapping_add(s2));
+                    kani::assume(v2 < v.wrapping_add(a) || s2 >= v2.wrapping_add(s));
+                }
+                Some(_) => {}
+                None => {
+                    if free.is_none() {
+                        free = Some(i);
+                    }
+                }
             }
         }
-        check!(
-            remember(asked, (v, a, s)),
-            "P-20: the stopping-distance stand-in remembers every point asked"
-        );
+        match free.and_then(|i| asked.get_mut(i)) {
+            Some(slot) => *slot = Some((v, a, s)),
+            None => check!(
+                false,
+                "P-20: the stopping-distance stand-in remembers every point asked"
+            ),
+        }
         s
     }
 
@@ -722,13 +723,26 @@ pub(crate) mod stand_in {
         let placed = unsafe { &mut *core::ptr::addr_of_mut!(PLACED) };
         let x: i64 = kani::any();
         kani::assume(x.unsigned_abs() < 1 << 42);
-        for &(p2, f2, x2) in placed.iter().flatten() {
-            kani::assume(p != p2 || f != f2 || x == x2);
+        let mut free = None;
+        for (i, slot) in placed.iter().enumerate() {
+            match *slot {
+                Some((p2, f2, x2)) => {
+                    kani::assume(p != p2 || f != f2 || x == x2);
+                }
+                None => {
+                    if free.is_none() {
+                        free = Some(i);
+                    }
+                }
+            }
         }
-        check!(
-            remember(placed, (p, f, x)),
-            "P-20: the exact-position stand-in remembers every position asked"
-        );
+        match free.and_then(|i| placed.get_mut(i)) {
+            Some(slot) => *slot = Some((p, f, x)),
+            None => check!(
+                false,
+                "P-20: the exact-position stand-in remembers every position asked"
+            ),
+        }
         x
     }
 
