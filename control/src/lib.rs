@@ -28,9 +28,9 @@
 //! Every function saturates instead of overflowing and never panics; the bounds are proved by the
 //! harnesses in `verification` (Kani) and checked by their `cargo test` twins.
 #![no_std]
-// No unsafe code in any build of the crate; the one exception is the Kani-only memory of the
-// stopping-distance stand-in (`verification::stand_in`), which exists only under `cfg(kani)` and
-// allows it locally.
+// No unsafe code in any build of the crate; the exceptions are the Kani-only memories of P-20's
+// stand-ins for the stopping distance and the exact position (`verification::stand_in`), which
+// exist only under `cfg(kani)` and allow it locally.
 #![cfg_attr(not(kani), forbid(unsafe_code))]
 #![cfg_attr(kani, deny(unsafe_code))]
 #![cfg_attr(

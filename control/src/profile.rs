@@ -1014,8 +1014,13 @@ mod tests {
             let s = |x: u64| closed_form(x, a);
             let low = u.saturating_sub(a);
             let span = u + a - low;
-            let mut picks = [low, u, u + a, low + span / 2, 0];
-            picks[4] = low + lcg(&mut seed) % (span + 1);
+            let picks = [
+                low,
+                u,
+                u + a,
+                low + span / 2,
+                low + lcg(&mut seed) % (span + 1),
+            ];
             for (i, &x) in picks.iter().enumerate() {
                 let at = s(x);
                 for delta in [-1i128, 0, 1, (n + i) as i128 % 97] {

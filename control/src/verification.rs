@@ -566,8 +566,10 @@ pub fn profile_smooth_for_fixed_target(src: &mut impl Source) {
 }
 
 /// The stand-ins of P-20's harness: the stopping distance S as an uninterpreted function that keeps
-/// the facts `proofs/REPORT.md` ("P-20") proves of the real one, and `toward_ahead` by its lemma.
-/// A property proven with them holds for every function with those facts, so for the real ones.
+/// the facts `proofs/REPORT.md` ("P-20") proves of the real one, `toward_ahead` by its lemma T,
+/// the move `advance` by its lemma A, and the exact position `sub_steps` as an uninterpreted
+/// function of its pair. A property proven with them holds for every function with those facts, so
+/// for the real ones.
 ///
 /// The facts of S, for speeds v, v' (sub-steps per tick) and one `accel_step` a ≥ 1:
 /// - L1: S(v) = v for v ≤ a;
@@ -591,7 +593,7 @@ pub(crate) mod stand_in {
     /// The points asked so far: (v, a, S(v)).
     static mut ASKED: [Option<(u64, u64, u64)>; POINTS] = [None; POINTS];
 
-    /// Any value for S(v) consistent with the facts L1–L4 and with every point asked before.
+    /// Any value for S(v) consistent with the facts L1–L5 and with every point asked before.
     #[allow(unsafe_code)]
     fn uninterpreted(v: u64, a: u64) -> u64 {
         check!(
