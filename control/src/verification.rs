@@ -544,11 +544,10 @@ pub fn profile_smooth_for_fixed_target(src: &mut impl Source) {
         "profile can still stop before the target and the limits"
     );
     let t = lim.travel.clamp(target);
-    let on = |s: &Trapezoid| s.position() == t && s.remainder() == 0;
     let (below, above) = (before.position() < t, !at_or_below(&before, t));
     cover!(
         src,
-        on(&p) && !on(&before) && v1 == Q::ZERO,
+        on(&p, t) && !on(&before, t) && v1 == Q::ZERO,
         "arrived at the target"
     );
     cover!(
