@@ -82,6 +82,12 @@ pub const TWIN_OF: &[(&str, &str, &str, &str)] = &[
         "one Kani entry per frame kind; the twin draws the kind",
     ),
     (
+        "mcu/src/odometry/verification.rs",
+        "verify_heading_wrap_stays_bounded_*",
+        "heading_wrap_stays_bounded",
+        "one Kani entry per sign of the heading's high part; the twin runs both",
+    ),
+    (
         "protocol/src/crc16/verification.rs",
         "verify_bursts_detected_*",
         "bursts_detected",
