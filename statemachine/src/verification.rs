@@ -926,9 +926,10 @@ pub mod model {
 
     /// Any value in `lo ..= hi`.
     fn within(lo: Speed, hi: Speed) -> Speed {
-        let x = Speed::from_bits(kani::any());
-        kani::assume(x >= lo && x <= hi);
-        x
+        let x: i32 = kani::any();
+        // Bits compared (`harness::Source::speed_within`).
+        kani::assume(x >= lo.to_bits() && x <= hi.to_bits());
+        Speed::from_bits(x)
     }
 
     /// Stands for [`crate::validate::validate_into`] (same signature): writes `last` only on success.
