@@ -223,8 +223,9 @@ pub(crate) fn check_candidate_at(src: &mut impl Source) {
 /// P-4: `append` from any state (any bytes, any count held and dropped, any counters): the byte goes
 /// last; when the buffer is full the bytes held first move to its front (the oldest byte goes,
 /// counted, if none was dropped), in order; nothing else changes. [`model::append`] stands in for
-/// it with the counts alone. The order of the bytes moved is the exhaustive test's
-/// (`append_keeps_the_bytes_in_order`); Kani proves the rest.
+/// it with the counts alone. Where the bytes go (the byte appended and the bytes moved) is the
+/// exhaustive test's (`append_keeps_the_bytes_in_order`, every count held and first byte held);
+/// Kani proves the rest, for any bytes.
 pub(crate) fn check_append(src: &mut impl Source) {
     let mut dec = StreamDecoder::new();
     dec.buf = src.bytes();
@@ -243,12 +244,13 @@ pub(crate) fn check_append(src: &mut impl Source) {
         dec.len == before.len - gone + 1 && dec.first == before.first.saturating_sub(gone),
         "append keeps the bytes held and adds one"
     );
-    check!(dec.buf[dec.len - 1] == byte, "the byte goes last");
-    // Where the bytes kept go is checked here by the twin, and for every state by the exhaustive
-    // test `append_keeps_the_bytes_in_order` (`append` moves bytes without reading them, so
-    // position-tagged bytes stand for any). Under Kani, a symbolic index into a buffer moved by a
-    // symbolic offset made this one check take 200 s of the harness's 227 s.
+    // Where the bytes go is checked here by the twin, and for every state by the exhaustive test
+    // `append_keeps_the_bytes_in_order` (`append` moves and writes bytes without reading them, so
+    // position-tagged bytes stand for any). Under Kani a symbolic index into a buffer moved by a
+    // symbolic offset is the costly part of the formula: the order of the bytes kept took 200 s of
+    // the harness's 227 s, and the byte appended most of what was left (92 s against 14 s).
     if !cfg!(kani) {
+        check!(dec.buf[dec.len - 1] == byte, "the byte goes last");
         let j = usize::from(src.u16_below(MAX_FRAME_LEN as u16));
         if j + 1 < dec.len {
             check!(
