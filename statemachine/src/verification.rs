@@ -996,30 +996,26 @@ pub mod model {
 /// itself is proven by INV-5's harness).
 #[cfg(kani)]
 macro_rules! proofs {
-    ($($kind:ident $body:ident => $two:ident $(, $four:ident)?;)*) => {
-        $( proofs!(@one $kind $body $two 2); $(proofs!(@one $kind $body $four 4);)? )*
+    ($($kind:ident $(#[$attr:meta])* $body:ident => $two:ident $(, $four:ident)?;)*) => {
+        $( proofs!(@row $kind [$(#[$attr])*] $body $two $(, $four)?); )*
     };
-    (@one plain $body:ident $name:ident $n:literal) => {
+    (@row $kind:ident $attrs:tt $body:ident $two:ident $(, $four:ident)?) => {
+        proofs!(@one $kind $attrs $body $two 2);
+        $(proofs!(@one $kind $attrs $body $four 4);)?
+    };
+    (@one plain [$(#[$attr:meta])*] $body:ident $name:ident $n:literal) => {
         #[kani::proof]
         #[kani::unwind(13)]
+        $(#[$attr])*
         fn $name() {
             super::$body::<$n>(&mut KaniSource);
         }
     };
-    // MiniSat (CBMC's default) rather than CaDiCaL, for the validation harnesses' float
-    // conversions: faster on two builds (`proofs/REPORT.md`, "Kani suite time").
-    (@one minisat $body:ident $name:ident $n:literal) => {
-        #[kani::proof]
-        #[kani::unwind(13)]
-        #[kani::solver(minisat)]
-        fn $name() {
-            super::$body::<$n>(&mut KaniSource);
-        }
-    };
-    (@one stubbed $body:ident $name:ident $n:literal) => {
+    (@one stubbed [$(#[$attr:meta])*] $body:ident $name:ident $n:literal) => {
         #[kani::proof]
         #[kani::unwind(13)]
         #[kani::stub(crate::validate::validate_into, crate::verification::model::any_validation)]
+        $(#[$attr])*
         fn $name() {
             super::$body::<$n>(&mut KaniSource);
         }
@@ -1030,11 +1026,14 @@ macro_rules! proofs {
 mod kani_entry {
     use crate::harness::KaniSource;
 
+    // A row's attributes after its kind go to both of its harnesses. MiniSat (CBMC's default)
+    // rather than CaDiCaL for the validation harnesses' float conversions: faster on two builds
+    // (`proofs/REPORT.md`, "Kani suite time").
     proofs! {
         plain initial_state_is_valid => verify_initial_state_is_valid_2, verify_initial_state_is_valid_4;
         stubbed one_step_properties => verify_one_step_properties_2, verify_one_step_properties_4;
         stubbed comm_loss_brakes_within_brake_after_ticks => verify_comm_loss_brakes_within_brake_after_ticks_2;
-        minisat validated_setpoints_are_finite_and_in_range => verify_validated_setpoints_are_finite_and_in_range_2, verify_validated_setpoints_are_finite_and_in_range_4;
+        plain #[kani::solver(minisat)] validated_setpoints_are_finite_and_in_range => verify_validated_setpoints_are_finite_and_in_range_2, verify_validated_setpoints_are_finite_and_in_range_4;
     }
 }
 
