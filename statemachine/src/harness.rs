@@ -465,8 +465,9 @@ pub mod arbitrary {
     /// Any command, NaN and out-of-range numbers, unsupported modes and a zero timeout included.
     pub fn command<const N: usize>(src: &mut impl Source) -> Command<N> {
         let mut axes = [AxisCommand::COAST; N];
-        for a in axes.iter_mut() {
-            *a = AxisCommand {
+        #[allow(clippy::indexing_slicing)]
+        for i in 0..N {
+            axes[i] = AxisCommand {
                 mode: axis_mode(src),
                 target: src.f32(),
                 cap: src.f32(),
@@ -484,13 +485,14 @@ pub mod arbitrary {
     pub fn setpoint<const N: usize>(src: &mut impl Source, cfg: &Config) -> Setpoint<N> {
         let p = cfg.params();
         let mut axes = [AxisSetpoint::passive(AxisMode::Coast); N];
-        for a in axes.iter_mut() {
+        #[allow(clippy::indexing_slicing)]
+        for i in 0..N {
             let mode = if src.bool() {
                 axis_mode_in(src, p.modes)
             } else {
                 axis_mode(src)
             };
-            *a = match mode {
+            axes[i] = match mode {
                 AxisMode::Coast | AxisMode::Short => AxisSetpoint::passive(mode),
                 AxisMode::Duty => AxisSetpoint {
                     mode,
@@ -595,26 +597,25 @@ pub mod arbitrary {
         let mode = mode(src);
         let brake_latched = mode == Mode::Brake;
         let mut rejected = [0u32; RejectReason::ALL.len()];
-        for r in rejected.iter_mut() {
-            *r = src.u32();
+        #[allow(clippy::indexing_slicing)]
+        for i in 0..rejected.len() {
+            rejected[i] = src.u32();
         }
         let mut applied = [Speed::ZERO; N];
         let mut axis_modes = [AxisMode::Coast; N];
         let mut held = [p.travel_lo; N];
-        for ((a, m), h) in applied
-            .iter_mut()
-            .zip(axis_modes.iter_mut())
-            .zip(held.iter_mut())
-        {
-            *m = if src.bool() {
+        #[allow(clippy::indexing_slicing)]
+        for i in 0..N {
+            let m = if src.bool() {
                 axis_mode_in(src, p.modes)
             } else {
                 axis_mode(src)
             };
+            axis_modes[i] = m;
             if !brake_latched {
-                *a = applied_for(src, &p, *m);
+                applied[i] = applied_for(src, &p, m);
             }
-            *h = position_in(src, &p);
+            held[i] = position_in(src, &p);
         }
         let estop_owners = src.u8() & src.u8() & 0b111;
         // Sparse bits for the tests; still every value under Kani (x & y & z covers all of u16).

@@ -139,7 +139,12 @@ impl Counters {
 
     /// All refused frames.
     pub fn rejected_total(&self) -> u32 {
-        self.rejected.iter().fold(0u32, |a, b| a.saturating_add(*b))
+        let mut total = 0u32;
+        #[allow(clippy::indexing_slicing)]
+        for i in 0..self.rejected.len() {
+            total = total.saturating_add(self.rejected[i]);
+        }
+        total
     }
 }
 
@@ -352,28 +357,30 @@ impl<const N: usize> Ladder<N> {
     /// True if `sp` is what [`validate`] can return under this configuration.
     fn setpoint_ok(&self, sp: &Setpoint<N>) -> bool {
         let p = self.cfg.params();
-        sp.brake_after >= 1
-            && sp.brake_after <= p.brake_after
-            && sp.axes.iter().all(|a| {
-                p.modes.contains(a.mode)
-                    && match a.mode {
-                        AxisMode::Coast | AxisMode::Short => {
-                            a.target == Speed::ZERO && a.cap == Speed::ZERO
-                        }
-                        AxisMode::Duty => {
-                            in_range(a.target, p.duty_max.saturating_neg(), p.duty_max)
-                                && a.cap == Speed::ZERO
-                        }
-                        AxisMode::Velocity => {
-                            in_range(a.target, p.v_max.saturating_neg(), p.v_max)
-                                && a.cap == Speed::ZERO
-                        }
-                        AxisMode::Position => {
-                            in_range(a.target, p.travel_lo, p.travel_hi)
-                                && in_range(a.cap, Speed::ZERO, p.v_max)
-                        }
+        let mut axes_ok = true;
+        #[allow(clippy::indexing_slicing)]
+        for i in 0..N {
+            let a = &sp.axes[i];
+            axes_ok &= p.modes.contains(a.mode)
+                && match a.mode {
+                    AxisMode::Coast | AxisMode::Short => {
+                        a.target == Speed::ZERO && a.cap == Speed::ZERO
                     }
-            })
+                    AxisMode::Duty => {
+                        in_range(a.target, p.duty_max.saturating_neg(), p.duty_max)
+                            && a.cap == Speed::ZERO
+                    }
+                    AxisMode::Velocity => {
+                        in_range(a.target, p.v_max.saturating_neg(), p.v_max)
+                            && a.cap == Speed::ZERO
+                    }
+                    AxisMode::Position => {
+                        in_range(a.target, p.travel_lo, p.travel_hi)
+                            && in_range(a.cap, Speed::ZERO, p.v_max)
+                    }
+                };
+        }
+        sp.brake_after >= 1 && sp.brake_after <= p.brake_after && axes_ok
     }
 
     /// True if `a` is a value an axis in mode `m` may hold.
@@ -393,22 +400,19 @@ impl<const N: usize> Ladder<N> {
     /// so harnesses may start from any state that satisfies it: an over-approximation of the reachable set.
     pub fn is_valid(&self) -> bool {
         let p = self.cfg.params();
-        let axes_ok = self
-            .axis_modes
-            .iter()
-            .zip(self.applied.iter())
-            .all(|(m, a)| self.applied_ok(*m, *a))
-            && self
-                .held
-                .iter()
-                .all(|h| in_range(*h, p.travel_lo, p.travel_hi));
+        let mut axes_ok = true;
+        #[allow(clippy::indexing_slicing)]
+        for i in 0..N {
+            axes_ok &= self.applied_ok(self.axis_modes[i], self.applied[i])
+                && in_range(self.held[i], p.travel_lo, p.travel_hi);
+        }
         let last_ok = !self.has_last || self.setpoint_ok(&self.last);
         let mode_ok = match self.mode {
             Mode::Normal | Mode::Reduced => self.age < p.hold_after,
             Mode::Hold => self.age < p.stop_after,
             // STOP's bound (age < brake_after) is the unlatched clause below.
             Mode::Stop => true,
-            Mode::Brake => self.applied.iter().all(|a| *a == Speed::ZERO),
+            Mode::Brake => self.applied == [Speed::ZERO; N],
         };
         let estop_ok = self.estop_owners & !ALL_SOURCES == 0
             && self.active.contains(FaultFlags::ESTOP) == (self.estop_owners != 0);
@@ -503,20 +507,17 @@ impl<const N: usize> Ladder<N> {
             Drive::Brake
         } else {
             let mut axes = [AxisDrive::Coast; N];
-            for (((d, m), a), h) in axes
-                .iter_mut()
-                .zip(self.axis_modes.iter())
-                .zip(self.applied.iter())
-                .zip(self.held.iter())
-            {
-                *d = match m {
+            #[allow(clippy::indexing_slicing)]
+            for i in 0..N {
+                let a = self.applied[i];
+                axes[i] = match self.axis_modes[i] {
                     AxisMode::Coast => AxisDrive::Coast,
                     AxisMode::Short => AxisDrive::Short,
-                    AxisMode::Duty => AxisDrive::Duty(*a),
-                    AxisMode::Velocity => AxisDrive::Velocity(*a),
+                    AxisMode::Duty => AxisDrive::Duty(a),
+                    AxisMode::Velocity => AxisDrive::Velocity(a),
                     AxisMode::Position => AxisDrive::Position {
-                        target: *h,
-                        cap: *a,
+                        target: self.held[i],
+                        cap: a,
                     },
                 };
             }
@@ -710,14 +711,16 @@ impl<const N: usize> Ladder<N> {
         } else {
             [AxisSetpoint::passive(AxisMode::Coast); N]
         };
-        for (((a, m), h), want) in self
-            .applied
-            .iter_mut()
-            .zip(self.axis_modes.iter_mut())
-            .zip(self.held.iter_mut())
-            .zip(wants.iter())
-        {
-            (*a, *m, *h) = axis_tick(&p, mode, *a, *m, *h, want);
+        #[allow(clippy::indexing_slicing)]
+        for i in 0..N {
+            (self.applied[i], self.axis_modes[i], self.held[i]) = axis_tick(
+                &p,
+                mode,
+                self.applied[i],
+                self.axis_modes[i],
+                self.held[i],
+                &wants[i],
+            );
         }
     }
 }

@@ -220,8 +220,9 @@ pub fn validate_into<const N: usize>(
     cfg: &Config,
 ) -> Result<(), RejectReason> {
     let mut axes = [AxisSetpoint::passive(AxisMode::Coast); N];
-    for (out, a) in axes.iter_mut().zip(cmd.axes.iter()) {
-        *out = validate_axis(a, cfg)?;
+    #[allow(clippy::indexing_slicing)]
+    for i in 0..N {
+        axes[i] = validate_axis(&cmd.axes[i], cfg)?;
     }
     let brake_after =
         frame_threshold(cmd.timeout, cfg.params().brake_after).ok_or(RejectReason::OutOfRange)?;
@@ -233,7 +234,9 @@ pub fn validate_into<const N: usize>(
     }
     // A velocity axis drives exactly when its command is enabled (velocity is not a passive mode).
     if has_last && last.enable && cmd.enable {
-        for (a, b) in axes.iter().zip(last.axes.iter()) {
+        #[allow(clippy::indexing_slicing)]
+        for i in 0..N {
+            let (a, b) = (&axes[i], &last.axes[i]);
             if a.mode == AxisMode::Velocity
                 && b.mode == AxisMode::Velocity
                 && a.target != Speed::ZERO

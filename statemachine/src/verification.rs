@@ -337,7 +337,9 @@ fn within_mode_limit<const N: usize>(src: &mut impl Source, s: &Step<N>) {
     let p = *l.config().params();
     let ticked = e == Event::Tick;
     let modes = l.axis_modes();
-    for ((a0, a1), m) in l0.applied().into_iter().zip(l.applied()).zip(modes) {
+    let (applied0, applied) = (l0.applied(), l.applied());
+    for i in 0..N {
+        let (a0, a1, m) = (applied0[i], applied[i], modes[i]);
         let (m0, m1) = (magnitude(a0), magnitude(a1));
         let (full, reduced) = if m == AxisMode::Duty {
             (p.duty_max, p.duty_reduced)
@@ -365,8 +367,7 @@ fn within_mode_limit<const N: usize>(src: &mut impl Source, s: &Step<N>) {
             Mode::Brake => check!(a1 == Speed::ZERO, "INV-3: BRAKE applies nothing"),
         }
     }
-    let any =
-        |f: &dyn Fn(AxisMode, Speed) -> bool| modes.iter().zip(l.applied()).any(|(m, a)| f(*m, a));
+    let any = |f: &dyn Fn(AxisMode, Speed) -> bool| (0..N).any(|i| f(modes[i], applied[i]));
     cover!(
         src,
         out.mode == Mode::Reduced
@@ -489,7 +490,8 @@ pub fn validated_setpoints_are_finite_and_in_range<const N: usize>(src: &mut imp
     };
     let within = |s: Speed, lo: Speed, hi: Speed| s >= lo && s <= hi;
     if let Ok(sp) = r {
-        for (a, c) in sp.axes.iter().zip(cmd.axes.iter()) {
+        for i in 0..N {
+            let (a, c) = (&sp.axes[i], &cmd.axes[i]);
             check!(a.mode == c.mode, "INV-5: the mode is the one sent");
             check!(
                 p.modes.contains(a.mode),
@@ -733,13 +735,10 @@ fn setpoint_step_bounded<const N: usize>(src: &mut impl Source, s: &Step<N>) {
         );
     }
     if l0.mode() != Mode::Brake && out.mode != Mode::Brake {
-        for (((a0, a1), m0), m1) in l0
-            .applied()
-            .into_iter()
-            .zip(l.applied())
-            .zip(l0.axis_modes())
-            .zip(l.axis_modes())
-        {
+        let (applied0, applied, modes0, modes) =
+            (l0.applied(), l.applied(), l0.axis_modes(), l.axis_modes());
+        for i in 0..N {
+            let (a0, a1, m0, m1) = (applied0[i], applied[i], modes0[i], modes[i]);
             if m0 == m1 {
                 let step = if m1 == AxisMode::Duty {
                     p.duty_step
@@ -796,7 +795,9 @@ fn drive_follows_modes<const N: usize>(src: &mut impl Source, s: &Step<N>) {
     let p = *l.config().params();
     if let Drive::Run(axes) = out.drive {
         let wants = l.last_valid().map(|sp| sp.axes);
-        for (i, (d, m)) in axes.iter().zip(l.axis_modes()).enumerate() {
+        let modes = l.axis_modes();
+        for i in 0..N {
+            let (d, m) = (&axes[i], modes[i]);
             let ok = match (m, d) {
                 (AxisMode::Coast, AxisDrive::Coast) | (AxisMode::Short, AxisDrive::Short) => true,
                 (AxisMode::Duty, AxisDrive::Duty(_))
@@ -825,17 +826,17 @@ fn drive_follows_modes<const N: usize>(src: &mut impl Source, s: &Step<N>) {
         }
         cover!(
             src,
-            axes.iter().any(|d| matches!(d, AxisDrive::Coast)),
+            (0..N).any(|i| matches!(axes[i], AxisDrive::Coast)),
             "an axis coasts while others run"
         );
         cover!(
             src,
-            axes.iter().any(|d| matches!(d, AxisDrive::Position { .. })),
+            (0..N).any(|i| matches!(axes[i], AxisDrive::Position { .. })),
             "a position axis runs"
         );
         cover!(
             src,
-            axes.iter().any(|d| matches!(d, AxisDrive::Duty(_))),
+            (0..N).any(|i| matches!(axes[i], AxisDrive::Duty(_))),
             "a duty axis runs"
         );
     }
@@ -949,12 +950,17 @@ pub mod model {
                 .copied()
                 .unwrap_or(RejectReason::Crc))
         };
-        if kani::any() || !cmd.axes.iter().all(|a| p.modes.contains(a.mode)) {
+        let mut modes_ok = true;
+        for i in 0..N {
+            modes_ok &= p.modes.contains(cmd.axes[i].mode);
+        }
+        if kani::any() || !modes_ok {
             return refuse(());
         }
         let mut axes = [AxisSetpoint::passive(AxisMode::Coast); N];
-        for (out, a) in axes.iter_mut().zip(cmd.axes.iter()) {
-            *out = match a.mode {
+        for i in 0..N {
+            let a = &cmd.axes[i];
+            axes[i] = match a.mode {
                 AxisMode::Coast | AxisMode::Short => AxisSetpoint::passive(a.mode),
                 AxisMode::Duty => AxisSetpoint {
                     mode: a.mode,
