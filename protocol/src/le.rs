@@ -22,7 +22,10 @@ impl<'a> Reader<'a> {
         let (head, tail) = self.rest.split_at(N);
         self.rest = tail;
         let mut out = [0u8; N];
-        out.copy_from_slice(head);
+        #[allow(clippy::indexing_slicing, clippy::manual_memcpy)]
+        for i in 0..N {
+            out[i] = head[i];
+        }
         Ok(out)
     }
 
@@ -91,34 +94,51 @@ impl<'a> Writer<'a> {
             }
         }
     }
+    fn put<const N: usize>(&mut self, bytes: [u8; N]) {
+        #[allow(clippy::indexing_slicing, clippy::needless_range_loop)]
+        for i in 0..N {
+            match self.buf.get_mut(self.pos) {
+                Some(slot) => {
+                    *slot = bytes[i];
+                    self.pos = self.pos.saturating_add(1);
+                }
+                None => self.short = true,
+            }
+        }
+    }
     pub(crate) fn u8(&mut self, v: u8) {
-        self.bytes(&[v]);
+        self.put([v]);
     }
     pub(crate) fn i8(&mut self, v: i8) {
-        self.bytes(&v.to_le_bytes());
+        self.put(v.to_le_bytes());
     }
     pub(crate) fn u16(&mut self, v: u16) {
-        self.bytes(&v.to_le_bytes());
+        self.put(v.to_le_bytes());
     }
     pub(crate) fn i16(&mut self, v: i16) {
-        self.bytes(&v.to_le_bytes());
+        self.put(v.to_le_bytes());
     }
     pub(crate) fn u32(&mut self, v: u32) {
-        self.bytes(&v.to_le_bytes());
+        self.put(v.to_le_bytes());
     }
     pub(crate) fn i32(&mut self, v: i32) {
-        self.bytes(&v.to_le_bytes());
+        self.put(v.to_le_bytes());
     }
     pub(crate) fn f32(&mut self, v: f32) {
-        self.bytes(&v.to_le_bytes());
+        self.put(v.to_le_bytes());
     }
 
     /// Writes every element of `vs` with `put` (e.g. `w.each(&speeds, Writer::f32)`): one plain loop
     /// per array, which a model checker unrolls to its exact length (an iterator `chain` leaves it a
     /// merged state whose end it cannot see, so it unrolls to the harness bound).
-    pub(crate) fn each<T: Copy>(&mut self, vs: &[T], put: impl Fn(&mut Self, T)) {
-        for &v in vs {
-            put(self, v);
+    pub(crate) fn each<T: Copy, const N: usize>(
+        &mut self,
+        vs: &[T; N],
+        put: impl Fn(&mut Self, T),
+    ) {
+        #[allow(clippy::indexing_slicing, clippy::needless_range_loop)]
+        for i in 0..N {
+            put(self, vs[i]);
         }
     }
 }
