@@ -1,4 +1,9 @@
 //! Little-endian field cursors over byte slices for the packed C layouts of seeds 001, 003 and 004; no panics.
+//!
+//! Fixed-size fields are copied byte by byte with `for i in 0..N` over `[u8; N]`, not with
+//! `copy_from_slice` or slice iterators: the same code on the MCU, and under Kani no pointer
+//! arithmetic to execute per byte (the seed 004 round-trip harnesses took half the time;
+//! `proofs/REPORT.md`, "Kani suite time").
 
 /// The slice ended before the field.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
