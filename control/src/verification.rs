@@ -610,8 +610,8 @@ pub(crate) mod stand_in {
             kani::assume(s >= v.wrapping_mul(2).wrapping_sub(a));
         }
         let mut free = None;
-        for (i, slot) in asked.iter().enumerate() {
-            match *slot {
+        for i in 0..POINTS {
+            match asked[i] {
                 Some((v2, a2, s2)) if a2 == a => {
                     // The same point, L3, L2 and L5 in both directions.
                     kani::assume(v != v2 || s == s2);
@@ -728,8 +728,8 @@ pub(crate) mod stand_in {
         let x: i64 = kani::any();
         kani::assume(x.unsigned_abs() < 1 << 42);
         let mut free = None;
-        for (i, slot) in placed.iter().enumerate() {
-            match *slot {
+        for i in 0..POSITIONS {
+            match placed[i] {
                 Some((p2, f2, x2)) => {
                     kani::assume(p != p2 || f != f2 || x == x2);
                 }
