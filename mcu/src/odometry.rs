@@ -270,27 +270,32 @@ fn wrap_once(h: &mut Sum) -> bool {
 
 /// Checks a configuration against the bounds in the module documentation.
 pub fn validate(k: &KinematicsConfig) -> Result<(), KinematicsError> {
-    let entries = || k.inverse.iter().flatten();
-    if !entries().chain(&k.ticks_to_rad).all(|v| v.is_finite()) {
+    let bounds = [MAX_LINEAR_GAIN, MAX_LINEAR_GAIN, MAX_YAW_GAIN];
+    // One pass by index over the 16 numbers (under Kani, no iterator's pointer offsets: the
+    // configuration harness took a third of its time); the refusal is the first rule broken.
+    let (mut finite, mut ticks_ok, mut within, mut zero) = (true, true, true, true);
+    #[allow(clippy::indexing_slicing, clippy::needless_range_loop)]
+    for j in 0..4 {
+        let t = k.ticks_to_rad[j];
+        finite &= t.is_finite();
+        ticks_ok &= (MIN_TICKS_TO_RAD..=MAX_TICKS_TO_RAD).contains(&t.abs());
+        for i in 0..3 {
+            let a = k.inverse[i][j];
+            finite &= a.is_finite();
+            within &= a.abs() <= bounds[i];
+            zero &= a == 0.0;
+        }
+    }
+    if !finite {
         return Err(KinematicsError::NotFinite);
     }
-    if !k
-        .ticks_to_rad
-        .iter()
-        .all(|t| (MIN_TICKS_TO_RAD..=MAX_TICKS_TO_RAD).contains(&t.abs()))
-    {
+    if !ticks_ok {
         return Err(KinematicsError::TicksToRad);
     }
-    let bounds = [MAX_LINEAR_GAIN, MAX_LINEAR_GAIN, MAX_YAW_GAIN];
-    let within = k
-        .inverse
-        .iter()
-        .zip(bounds)
-        .all(|(row, max)| row.iter().all(|a| a.abs() <= max));
     if !within {
         return Err(KinematicsError::InverseEntry);
     }
-    if entries().all(|a| *a == 0.0) {
+    if zero {
         return Err(KinematicsError::ZeroMatrix);
     }
     Ok(())

@@ -482,14 +482,14 @@ pub fn pi_spi_gain_updates_stay_bounded(src: &mut impl Source) {
 fn accepted_kinematics(src: &mut impl Source) -> protocol::pi_spi::assumed::KinematicsConfig {
     use crate::odometry::{MAX_LINEAR_GAIN, MAX_TICKS_TO_RAD, MAX_YAW_GAIN, MIN_TICKS_TO_RAD};
     let mut k = protocol::pi_spi::assumed::KinematicsConfig::default();
-    for (row, max) in k
-        .inverse
-        .iter_mut()
-        .zip([MAX_LINEAR_GAIN, MAX_LINEAR_GAIN, MAX_YAW_GAIN])
-    {
-        for a in row.iter_mut() {
+    // Indexed, not iterated (as `odometry::validate`): Kani executes no pointer offsets.
+    let bounds = [MAX_LINEAR_GAIN, MAX_LINEAR_GAIN, MAX_YAW_GAIN];
+    #[allow(clippy::needless_range_loop)]
+    for i in 0..3 {
+        let max = bounds[i];
+        for j in 0..4 {
             let v = src.f32();
-            *a = if v.is_finite() && v.abs() <= max {
+            k.inverse[i][j] = if v.is_finite() && v.abs() <= max {
                 v
             } else if src.bool() {
                 0.5
@@ -498,20 +498,19 @@ fn accepted_kinematics(src: &mut impl Source) -> protocol::pi_spi::assumed::Kine
             };
         }
     }
-    for t in k.ticks_to_rad.iter_mut() {
+    for j in 0..4 {
         let v = src.f32();
-        *t = if v.is_finite() && v.abs() >= MIN_TICKS_TO_RAD && v.abs() <= MAX_TICKS_TO_RAD {
-            v
-        } else if src.bool() {
-            0.01
-        } else {
-            -1.5
-        };
+        k.ticks_to_rad[j] =
+            if v.is_finite() && v.abs() >= MIN_TICKS_TO_RAD && v.abs() <= MAX_TICKS_TO_RAD {
+                v
+            } else if src.bool() {
+                0.01
+            } else {
+                -1.5
+            };
     }
-    if k.inverse.iter().flatten().all(|a| *a == 0.0) {
-        if let Some(a) = k.inverse.first_mut().and_then(|row| row.first_mut()) {
-            *a = 0.0125;
-        }
+    if k.inverse == [[0.0; 4]; 3] {
+        k.inverse[0][0] = 0.0125;
     }
     k
 }
@@ -551,15 +550,15 @@ pub fn odometry_configure_guarded(src: &mut impl Source) {
         usize::from(way.min(1))
     };
     let at = usize::from(src.below(16));
-    for (i, v) in k
-        .inverse
-        .iter_mut()
-        .flatten()
-        .chain(k.ticks_to_rad.iter_mut())
-        .enumerate()
-    {
+    // The 16 numbers in wire order: the matrix by rows, then `ticks_to_rad`.
+    for i in 0..16 {
         if raw == 16 || (raw == 1 && i == at) {
-            *v = src.f32();
+            let v = src.f32();
+            if i < 12 {
+                k.inverse[i / 4][i % 4] = v;
+            } else {
+                k.ticks_to_rad[i - 12] = v;
+            }
         }
     }
     let before = o;
