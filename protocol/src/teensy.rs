@@ -448,14 +448,18 @@ pub(crate) fn stuff_into(body: &[u8], out: &mut [u8]) -> Option<usize> {
     let (code, data) = block.split_first_mut()?;
     // Position in the block of the next zero of the body (a code byte), or the block's end.
     let mut next = n.saturating_add(1);
-    for (i, (o, &b)) in data.iter_mut().zip(body).enumerate().rev() {
+    // By index (`data` and `body` are both `n` long), not zipped: see `crate::le`.
+    #[allow(clippy::indexing_slicing)]
+    for i in (0..n).rev() {
         let p = i.saturating_add(1);
-        if b == 0 {
-            *o = u8::try_from(next.saturating_sub(p)).ok()?;
+        let b = body[i];
+        data[i] = if b == 0 {
+            let code = u8::try_from(next.saturating_sub(p)).ok()?;
             next = p;
+            code
         } else {
-            *o = b;
-        }
+            b
+        };
     }
     *code = u8::try_from(next).ok()?;
     Some(n.saturating_add(1))
@@ -480,16 +484,19 @@ pub(crate) fn unstuff(stuffed: &[u8], out: &mut [u8]) -> Option<usize> {
         return None;
     }
     let mut next = usize::from(first);
-    for (i, (o, &d)) in out.iter_mut().zip(data).enumerate() {
+    // By index (`out` is at least as long as `data`), not zipped: see `crate::le`.
+    #[allow(clippy::indexing_slicing)]
+    for i in 0..data.len() {
+        let d = data[i];
         if d == 0 {
             return None;
         }
         let p = i.saturating_add(1);
         if p == next {
-            *o = 0;
+            out[i] = 0;
             next = p.saturating_add(usize::from(d));
         } else {
-            *o = d;
+            out[i] = d;
         }
     }
     (next == data.len().saturating_add(1)).then_some(data.len())
