@@ -88,27 +88,25 @@ impl<'a> Writer<'a> {
         }
     }
 
+    /// Writes one byte at the cursor, or marks the writer short where the buffer has ended.
+    fn byte(&mut self, b: u8) {
+        match self.buf.get_mut(self.pos) {
+            Some(slot) => {
+                *slot = b;
+                self.pos = self.pos.saturating_add(1);
+            }
+            None => self.short = true,
+        }
+    }
     pub(crate) fn bytes(&mut self, bytes: &[u8]) {
         for &b in bytes {
-            match self.buf.get_mut(self.pos) {
-                Some(slot) => {
-                    *slot = b;
-                    self.pos = self.pos.saturating_add(1);
-                }
-                None => self.short = true,
-            }
+            self.byte(b);
         }
     }
     fn put<const N: usize>(&mut self, bytes: [u8; N]) {
         #[allow(clippy::indexing_slicing, clippy::needless_range_loop)]
         for i in 0..N {
-            match self.buf.get_mut(self.pos) {
-                Some(slot) => {
-                    *slot = bytes[i];
-                    self.pos = self.pos.saturating_add(1);
-                }
-                None => self.short = true,
-            }
+            self.byte(bytes[i]);
         }
     }
     pub(crate) fn u8(&mut self, v: u8) {
