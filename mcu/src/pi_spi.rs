@@ -216,10 +216,13 @@ pub fn gains_from_wire(
         i_limit: b.i_limit,
         anti_windup: AntiWindup::Conditional,
     }; MOTORS];
-    for (((g, kp), ki), kd) in out.iter_mut().zip(s.kp).zip(s.ki).zip(s.kd) {
-        g.kp = gain(kp, b.kp_max, 1.0)?;
-        g.ki_dt = gain(ki, b.ki_max, DT)?;
-        g.kd_dt = gain(kd, b.kd_max, 1.0 / DT)?;
+    // By index (every `i` is below `MOTORS`): Kani models each step of a slice iterator as a
+    // checked pointer offset, which a plain loop over the arrays does not need.
+    #[allow(clippy::indexing_slicing, clippy::needless_range_loop)]
+    for i in 0..MOTORS {
+        out[i].kp = gain(s.kp[i], b.kp_max, 1.0)?;
+        out[i].ki_dt = gain(s.ki[i], b.ki_max, DT)?;
+        out[i].kd_dt = gain(s.kd[i], b.kd_max, 1.0 / DT)?;
     }
     Ok(out)
 }

@@ -442,7 +442,9 @@ pub fn pi_spi_gain_updates_stay_bounded(src: &mut impl Source) {
     };
     let r = gains_from_wire(&s, &b);
     if let Ok(set) = &r {
-        for g in set {
+        #[allow(clippy::indexing_slicing, clippy::needless_range_loop)]
+        for i in 0..crate::pi_spi::MOTORS {
+            let g = &set[i];
             check!(g.is_valid(), "accepted gains have valid limits");
             check!(
                 g.out_limit == b.out_limit && g.i_limit == b.i_limit,

@@ -545,8 +545,9 @@ fn read_i32x4(r: &mut le::Reader<'_>) -> Result<[i32; 4], le::Short> {
 
 fn read_i8x9(r: &mut le::Reader<'_>) -> Result<[i8; 9], le::Short> {
     let mut out = [0i8; 9];
-    for v in out.iter_mut() {
-        *v = r.i8()?;
+    #[allow(clippy::indexing_slicing, clippy::needless_range_loop)]
+    for i in 0..9 {
+        out[i] = r.i8()?;
     }
     Ok(out)
 }

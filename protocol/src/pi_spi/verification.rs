@@ -22,8 +22,9 @@ fn f32x4(src: &mut impl Source) -> [f32; 4] {
 
 fn i8x9(src: &mut impl Source) -> [i8; 9] {
     let mut out = [0i8; 9];
-    for v in out.iter_mut() {
-        *v = src.u8() as i8;
+    #[allow(clippy::indexing_slicing, clippy::needless_range_loop)]
+    for i in 0..9 {
+        out[i] = src.u8() as i8;
     }
     out
 }
@@ -70,9 +71,7 @@ pub(crate) fn check_decode_total(src: &mut impl Source) {
     // Under Kani any bytes already include every buffer; the twin would not draw a valid one at
     // random, so half its cases are encoded buffers with one checked byte replaced.
     if cfg!(kani) || src.bool() {
-        for b in rx.iter_mut() {
-            *b = src.u8();
-        }
+        rx = src.bytes();
     } else {
         // A valid buffer with one of its first 41 bytes (the checked fields) replaced.
         encode_rx(&any_rx(src), &mut rx);
@@ -87,10 +86,7 @@ pub(crate) fn check_decode_total(src: &mut impl Source) {
         ),
         "P-4: decode_rx returns a buffer or one of its typed errors"
     );
-    let mut tx = [0u8; TX_LEN];
-    for b in tx.iter_mut() {
-        *b = src.u8();
-    }
+    let tx: [u8; TX_LEN] = src.bytes();
     let t = decode_tx(&tx);
     check!(
         matches!(t, Ok(_) | Err(RejectReason::Version)),
