@@ -801,9 +801,10 @@ pub(crate) fn check_seal_open(src: &mut impl Source) {
     let len = usize::from(src.below(MAX_PAYLOAD as u8 + 1));
     // The padding zeroed byte by byte, each at a fixed place (a slice from a symbolic start would
     // make every byte's place symbolic for the solver).
-    for (i, b) in f.iter_mut().enumerate().take(CRC_OFFSET) {
+    #[allow(clippy::indexing_slicing, clippy::needless_range_loop)]
+    for i in 0..CRC_OFFSET {
         if i >= PAYLOAD_OFFSET + len {
-            *b = 0;
+            f[i] = 0;
         }
     }
     seal(&mut f, len);
@@ -835,9 +836,10 @@ pub(crate) fn padding_by_bytes(frame: &[u8; FRAME_LEN], from: usize) -> bool {
         "P-3: the padding is asked about only from a start up to the CRC"
     );
     let mut ored = 0u8;
-    for (i, b) in frame.iter().enumerate().take(CRC_OFFSET) {
+    #[allow(clippy::indexing_slicing, clippy::needless_range_loop)]
+    for i in 0..CRC_OFFSET {
         if i >= from {
-            ored |= *b;
+            ored |= frame[i];
         }
     }
     ored == 0
