@@ -649,20 +649,46 @@ fn open(frame: &[u8; FRAME_LEN]) -> Result<&[u8], RejectReason> {
 }
 
 /// True if bytes `from..CRC_OFFSET` of `frame` are all zero (none when `from ≥ CRC_OFFSET`).
+///
+/// A word at a time (the padding is most of the frame), down from the CRC: the `k`-th word read is
+/// bytes `58 − 4k .. 62 − 4k`, a place fixed by the count alone, and only the word that holds
+/// `from` is masked. Read up from `from` instead, every word's place would be one the frame's
+/// length byte gives, which a model checker has to search.
+#[allow(
+    clippy::indexing_slicing,
+    clippy::arithmetic_side_effects,
+    clippy::needless_range_loop
+)]
 fn padding_is_zero(frame: &[u8; FRAME_LEN], from: usize) -> bool {
-    frame.get(from..CRC_OFFSET).is_none_or(all_zero)
-}
-
-/// True if every byte of `bytes` is zero. A word at a time: the padding is most of the frame.
-fn all_zero(bytes: &[u8]) -> bool {
-    let words = bytes.chunks_exact(4);
-    let tail = words.remainder().iter().fold(0u8, |acc, &b| acc | b);
-    let ored = words.fold(0u32, |acc, w| {
-        let mut word = [0u8; 4];
-        word.copy_from_slice(w);
-        acc | u32::from_ne_bytes(word)
-    });
-    ored == 0 && tail == 0
+    const WORDS: usize = CRC_OFFSET / 4;
+    let mut ored = 0u32;
+    for k in 0..WORDS {
+        // k < WORDS, so 0 < 4·(k + 1) ≤ CRC_OFFSET and start + 3 < CRC_OFFSET.
+        let start = CRC_OFFSET - 4 * (k + 1);
+        if start + 4 <= from {
+            return ored == 0;
+        }
+        let mut word = u32::from_le_bytes([
+            frame[start],
+            frame[start + 1],
+            frame[start + 2],
+            frame[start + 3],
+        ]);
+        if start < from {
+            // The word that holds `from` (1 to 3 bytes into it): its bytes before `from` are
+            // payload, and every word after this one would be too.
+            word &= u32::MAX << ((from - start) * 8);
+            return ored | word == 0;
+        }
+        ored |= word;
+    }
+    // The bytes before the first whole word (the length byte and the first payload byte).
+    for i in 0..CRC_OFFSET % 4 {
+        if i >= from {
+            ored |= u32::from(frame[i]);
+        }
+    }
+    ored == 0
 }
 
 /// Encodes `cmd` into a complete frame (length, payload, zero padding, CRC); `protocol_version` is
