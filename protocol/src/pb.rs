@@ -143,15 +143,17 @@ impl<'a> Writer<'a> {
     }
 }
 
-/// [`Reader::varint`] for two bytes or more (or none left): the value and the bytes after it. Takes
-/// and returns the slice by value, so the caller's reader can stay in registers.
+/// [`Reader::varint`] for two bytes or more (or none left) at `pos` of `buf`: the value and the
+/// position after it. Takes and returns the position by value, so the caller's reader can stay in
+/// registers.
 #[inline(never)]
-fn varint_long(bytes: &[u8]) -> Result<(u64, &[u8]), DecodeError> {
-    let mut rest = bytes;
+fn varint_long(buf: &[u8], pos: usize) -> Result<(u64, usize), DecodeError> {
+    let mut at = pos;
     let mut value: u64 = 0;
     for i in 0..10u32 {
-        let (&b, tail) = rest.split_first().ok_or(DecodeError)?;
-        rest = tail;
+        let b = *buf.get(at).ok_or(DecodeError)?;
+        // `at` < `buf.len()`, so one more is at most the length.
+        at = at.wrapping_add(1);
         let bits = u64::from(b & 0x7F);
         // The tenth byte carries bit 63 only.
         if i == 9 && bits > 1 {
@@ -159,7 +161,7 @@ fn varint_long(bytes: &[u8]) -> Result<(u64, &[u8]), DecodeError> {
         }
         value |= bits.wrapping_shl(i.wrapping_mul(7));
         if b & 0x80 == 0 {
-            return Ok((value, rest));
+            return Ok((value, at));
         }
     }
     Err(DecodeError)
@@ -179,29 +181,37 @@ pub(crate) enum Value {
 }
 
 /// Reads fields from a payload; every method returns an error rather than reading past the end.
+///
+/// A position into the payload rather than the rest of it as a slice: the same loads on the MCU,
+/// and under Kani plain indexing instead of a pointer offset checked at every byte.
 pub(crate) struct Reader<'a> {
-    rest: &'a [u8],
+    buf: &'a [u8],
+    /// Bytes read: never more than `buf.len()`.
+    pos: usize,
 }
 
 impl<'a> Reader<'a> {
     /// A reader over the whole of `payload`.
     pub(crate) fn new(payload: &'a [u8]) -> Self {
-        Self { rest: payload }
+        Self {
+            buf: payload,
+            pos: 0,
+        }
     }
 
     /// Bytes not read yet.
-    #[cfg(any(test, kani))]
     pub(crate) fn remaining(&self) -> usize {
-        self.rest.len()
+        self.buf.len().saturating_sub(self.pos)
     }
 
-    fn take(&mut self, n: usize) -> Result<&'a [u8], DecodeError> {
-        if n > self.rest.len() {
+    /// Skips `n` bytes.
+    fn take(&mut self, n: usize) -> Result<(), DecodeError> {
+        if n > self.remaining() {
             return Err(DecodeError);
         }
-        let (head, tail) = self.rest.split_at(n);
-        self.rest = tail;
-        Ok(head)
+        // At most `buf.len()`: `n` is within what remains.
+        self.pos = self.pos.wrapping_add(n);
+        Ok(())
     }
 
     /// A varint of at most 10 bytes whose value fits 64 bits.
@@ -210,17 +220,30 @@ impl<'a> Reader<'a> {
     /// that case is inlined into the caller, longer varints take the out-of-line loop.
     #[inline(always)]
     fn varint(&mut self) -> Result<u64, DecodeError> {
-        match self.rest.split_first() {
-            Some((&b, tail)) if b & 0x80 == 0 => {
-                self.rest = tail;
+        match self.buf.get(self.pos) {
+            Some(&b) if b & 0x80 == 0 => {
+                self.pos = self.pos.wrapping_add(1);
                 Ok(u64::from(b))
             }
             _ => {
-                let (value, rest) = varint_long(self.rest)?;
-                self.rest = rest;
+                let (value, pos) = varint_long(self.buf, self.pos)?;
+                self.pos = pos;
                 Ok(value)
             }
         }
+    }
+
+    /// Four bytes, little-endian.
+    fn u32_le(&mut self) -> Result<u32, DecodeError> {
+        if self.remaining() < 4 {
+            return Err(DecodeError);
+        }
+        let p = self.pos;
+        // p + 3 < buf.len(), checked above.
+        #[allow(clippy::indexing_slicing, clippy::arithmetic_side_effects)]
+        let w = [self.buf[p], self.buf[p + 1], self.buf[p + 2], self.buf[p + 3]];
+        self.pos = p.wrapping_add(4);
+        Ok(u32::from_le_bytes(w))
     }
 
     /// The next field, or `None` at the end of the payload.
@@ -228,7 +251,7 @@ impl<'a> Reader<'a> {
     /// Errors: truncated key or value, field number 0 or above 2²⁹ − 1, wire types 3, 4, 6, 7
     /// (groups are deprecated and unsupported, as in nanopb), a LEN field longer than the rest.
     pub(crate) fn next_field(&mut self) -> Result<Option<(u32, Value)>, DecodeError> {
-        if self.rest.is_empty() {
+        if self.remaining() == 0 {
             return Ok(None);
         }
         let key = self.varint()?;
@@ -247,11 +270,7 @@ impl<'a> Reader<'a> {
                 self.take(len)?;
                 Value::Len
             }
-            WT_I32 => {
-                let (&w, tail) = self.rest.split_first_chunk::<4>().ok_or(DecodeError)?;
-                self.rest = tail;
-                Value::I32(u32::from_le_bytes(w))
-            }
+            WT_I32 => Value::I32(self.u32_le()?),
             _ => return Err(DecodeError),
         };
         Ok(Some((field, value)))
