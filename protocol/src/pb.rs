@@ -241,7 +241,12 @@ impl<'a> Reader<'a> {
         let p = self.pos;
         // p + 3 < buf.len(), checked above.
         #[allow(clippy::indexing_slicing, clippy::arithmetic_side_effects)]
-        let w = [self.buf[p], self.buf[p + 1], self.buf[p + 2], self.buf[p + 3]];
+        let w = [
+            self.buf[p],
+            self.buf[p + 1],
+            self.buf[p + 2],
+            self.buf[p + 3],
+        ];
         self.pos = p.wrapping_add(4);
         Ok(u32::from_le_bytes(w))
     }
