@@ -140,25 +140,44 @@ pub enum MatrixDefect {
 ///
 /// The determinant of a signed permutation is the permutation's sign times the product of the
 /// signs: +1 exactly when the permutation is even and the number of −1 entries is even, or both odd.
+//
+// By index over the nine entries (row r, column c at 3·r + c < 9): under Kani no slice iterator,
+// whose every step it models as a checked pointer offset.
+#[allow(
+    clippy::indexing_slicing,
+    clippy::arithmetic_side_effects,
+    clippy::needless_range_loop
+)]
 pub fn check_rotation(m: [i8; 9]) -> Result<(), MatrixDefect> {
-    if m.iter().any(|v| !(-1..=1).contains(v)) {
-        return Err(MatrixDefect::Entry);
+    for i in 0..9 {
+        if !(-1..=1).contains(&m[i]) {
+            return Err(MatrixDefect::Entry);
+        }
     }
-    let one_per_row = m
-        .chunks_exact(3)
-        .all(|r| r.iter().filter(|&&v| v != 0).count() == 1);
-    let one_per_column =
-        (0..3).all(|c| m.iter().skip(c).step_by(3).filter(|&&v| v != 0).count() == 1);
-    if !(one_per_row && one_per_column) {
+    // Nonzero entries per row and per column (at most 3 each); row r's last nonzero entry is in
+    // column perm[r], its only one once the counts are all 1.
+    let mut per_row = [0u8; 3];
+    let mut per_column = [0u8; 3];
+    let mut perm = [0usize; 3];
+    let mut negatives = 0u8;
+    for r in 0..3 {
+        for c in 0..3 {
+            let v = m[3 * r + c];
+            if v != 0 {
+                per_row[r] += 1;
+                per_column[c] += 1;
+                perm[r] = c;
+            }
+            if v < 0 {
+                negatives += 1;
+            }
+        }
+    }
+    if per_row != [1; 3] || per_column != [1; 3] {
         return Err(MatrixDefect::NotPermutation);
     }
-    // Row r's nonzero entry is in column perm[r].
-    let mut perm = [0usize; 3];
-    for (p, row) in perm.iter_mut().zip(m.chunks_exact(3)) {
-        *p = row.iter().position(|&v| v != 0).unwrap_or(0);
-    }
     let even_perm = matches!(perm, [0, 1, 2] | [1, 2, 0] | [2, 0, 1]);
-    let even_negatives = m.iter().filter(|&&v| v < 0).count() % 2 == 0;
+    let even_negatives = negatives & 1 == 0;
     if even_perm != even_negatives {
         return Err(MatrixDefect::Reflection);
     }
