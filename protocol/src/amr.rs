@@ -650,44 +650,32 @@ fn open(frame: &[u8; FRAME_LEN]) -> Result<&[u8], RejectReason> {
 
 /// True if bytes `from..CRC_OFFSET` of `frame` are all zero (none when `from ≥ CRC_OFFSET`).
 ///
-/// A word at a time (the padding is most of the frame), down from the CRC: the `k`-th word read is
-/// bytes `58 − 4k .. 62 − 4k`, a place fixed by the count alone, and only the word that holds
-/// `from` is masked. Read up from `from` instead, every word's place would be one the frame's
-/// length byte gives, which a model checker has to search.
-#[allow(
-    clippy::indexing_slicing,
-    clippy::arithmetic_side_effects,
-    clippy::needless_range_loop
-)]
+/// A word at a time (the padding is most of the frame), down from the CRC: the frame is 16 words
+/// (`k`-th: bytes `4k .. 4k + 4`), read from word 15 down to the word that holds `from`, each at a
+/// place fixed by the loop's count alone; the first word read loses the CRC's two bytes and the
+/// last the payload bytes before `from`. Read up from `from` instead, every word's place would be
+/// one the frame's length byte gives, which a model checker has to search.
+#[allow(clippy::indexing_slicing, clippy::arithmetic_side_effects)]
 fn padding_is_zero(frame: &[u8; FRAME_LEN], from: usize) -> bool {
-    const WORDS: usize = CRC_OFFSET / 4;
+    // The CRC takes the last two bytes of word 15: little-endian, those are its upper half.
+    const _: () = assert!(CRC_OFFSET == 4 * 15 + 2 && FRAME_LEN == 4 * 16);
+    const BEFORE_CRC: u32 = 0x0000_FFFF;
+    if from >= CRC_OFFSET {
+        return true;
+    }
+    let (words, _) = frame.as_chunks::<4>();
+    // from < 62, so first ≤ 15 and every k below is within the 16 words.
+    let first = from / 4;
+    let mut k = 15;
+    let mut word = u32::from_le_bytes(words[k]) & BEFORE_CRC;
     let mut ored = 0u32;
-    for k in 0..WORDS {
-        // k < WORDS, so 0 < 4·(k + 1) ≤ CRC_OFFSET and start + 3 < CRC_OFFSET.
-        let start = CRC_OFFSET - 4 * (k + 1);
-        if start + 4 <= from {
-            return ored == 0;
-        }
-        let mut word = u32::from_le_bytes([
-            frame[start],
-            frame[start + 1],
-            frame[start + 2],
-            frame[start + 3],
-        ]);
-        if start < from {
-            // The word that holds `from` (1 to 3 bytes into it): its bytes before `from` are
-            // payload, and every word after this one would be too.
-            word &= u32::MAX << ((from - start) * 8);
-            return ored | word == 0;
-        }
+    while k > first {
         ored |= word;
+        k -= 1;
+        word = u32::from_le_bytes(words[k]);
     }
-    // The bytes before the first whole word (the length byte and the first payload byte).
-    for i in 0..CRC_OFFSET % 4 {
-        if i >= from {
-            ored |= u32::from(frame[i]);
-        }
-    }
+    // Word `first` holds `from`, (from % 4) bytes in: the bytes before it are payload.
+    ored |= word & (u32::MAX << (8 * (from % 4)));
     ored == 0
 }
 

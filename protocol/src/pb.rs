@@ -234,20 +234,12 @@ impl<'a> Reader<'a> {
     }
 
     /// Four bytes, little-endian.
+    #[inline(always)]
     fn u32_le(&mut self) -> Result<u32, DecodeError> {
-        if self.remaining() < 4 {
-            return Err(DecodeError);
-        }
-        let p = self.pos;
-        // p + 3 < buf.len(), checked above.
-        #[allow(clippy::indexing_slicing, clippy::arithmetic_side_effects)]
-        let w = [
-            self.buf[p],
-            self.buf[p + 1],
-            self.buf[p + 2],
-            self.buf[p + 3],
-        ];
-        self.pos = p.wrapping_add(4);
+        let rest = self.buf.get(self.pos..).unwrap_or(&[]);
+        let (&w, _) = rest.split_first_chunk::<4>().ok_or(DecodeError)?;
+        // Four bytes were there, so `pos` stays within `buf.len()`.
+        self.pos = self.pos.wrapping_add(4);
         Ok(u32::from_le_bytes(w))
     }
 
