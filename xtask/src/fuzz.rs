@@ -108,9 +108,15 @@ pub struct Options {
     pub only: Vec<String>,
 }
 
+/// The nightly toolchain the instrumented binaries are built with unless `--toolchain` says
+/// otherwise: a dated one, so that a campaign's figures (proofs/REPORT.md, "Fuzzing") can be
+/// rerun on the same compiler and the same libFuzzer instrumentation passes. Install it with
+/// `rustup toolchain install nightly-2026-05-20 --profile minimal`.
+pub const NIGHTLY: &str = "nightly-2026-05-20";
+
 /// The usage line of `cargo xtask fuzz`.
 pub const USAGE: &str = "cargo xtask fuzz [--seconds N (60)] [--runs N] [--jobs J (1)] [--merge] \
-    [--toolchain T (nightly)] [TARGET...]";
+    [--toolchain T (nightly-2026-05-20)] [TARGET...]";
 
 /// `cargo xtask fuzz --help`.
 pub const HELP: &str = "Runs every bolero fuzz target coverage-guided (libFuzzer, no sanitizer, the release
@@ -122,7 +128,8 @@ Options:
   --jobs J        targets run at once (default 1)
   --merge         minimise what the run found into the committed corpora
                   (<crate>/tests/__fuzz__/<target>/corpus/, one input per edge)
-  --toolchain T   rustup toolchain that builds the instrumented binaries (default nightly)
+  --toolchain T   rustup toolchain that builds the instrumented binaries
+                  (default nightly-2026-05-20, the pinned one)
   TARGET...       run only these targets (default: all)
 
 Exit status: 0 if every target ran without a finding, 1 otherwise, 64 for a usage error.
@@ -135,7 +142,7 @@ pub fn parse_args(args: &[String]) -> Result<Options, String> {
         runs: None,
         jobs: 1,
         merge: false,
-        toolchain: "nightly".to_string(),
+        toolchain: NIGHTLY.to_string(),
         only: Vec::new(),
     };
     let mut it = args.iter();
@@ -313,8 +320,9 @@ fn build(root: &Path, opts: &Options, package: &str, test: &str) -> Result<PathB
         .map_err(|e| format!("cannot run rustup ({e}); is rustup installed?"))?;
     if !out.status.success() {
         return Err(format!(
-            "building {package}'s tests/{test}.rs for libFuzzer failed ({}); is the `{}` toolchain installed?",
-            out.status, opts.toolchain
+            "building {package}'s tests/{test}.rs for libFuzzer failed ({}); is the `{}` toolchain \
+             installed (`rustup toolchain install {} --profile minimal`)?",
+            out.status, opts.toolchain, opts.toolchain
         ));
     }
     let text = String::from_utf8_lossy(&out.stdout);
