@@ -88,6 +88,12 @@ pub const TWIN_OF: &[(&str, &str, &str, &str)] = &[
         "one Kani entry per sign of the heading's high part; the twin runs both",
     ),
     (
+        "control/src/verification.rs",
+        "verify_profile_smooth_for_fixed_target_*",
+        "profile_smooth_for_fixed_target",
+        "one Kani entry per direction of the velocity (down, or at rest and up); the twin runs both",
+    ),
+    (
         "protocol/src/crc16/verification.rs",
         "verify_bursts_detected_*",
         "bursts_detected",
