@@ -9,7 +9,10 @@
 //! harness in name order, so the report's figures come from a run, not from typing. With `--write
 //! DIR…` it rewrites the generated block of `proofs/REPORT.md` (between `<!-- kani:begin` and
 //! `<!-- kani:end -->`) with one such table per directory, under the command and the wall-clock
-//! time that `.ci/run` recorded beside it (`<dir>.command`, `<dir>.seconds`).
+//! time that `.ci/run` recorded beside it (`<dir>.command`, `<dir>.seconds`). With `--check DIR…`
+//! it fails when those tables and the run differ in a harness, a result, a check count or a cover
+//! count (not in times): `.ci/run` runs it after its Kani steps, so the tables stay those of the
+//! code.
 //!
 //! `fuzz [--seconds N] [--runs N] [--jobs J] [--merge] [TARGET…]`: runs every bolero fuzz target
 //! coverage-guided (libFuzzer, nightly) and prints executions, coverage and corpus per target (see
@@ -70,18 +73,23 @@ fn parse(harness: &str, text: &str) -> Row {
     row
 }
 
+/// A row's result as the table prints it.
+fn result_cell(r: &Row) -> &'static str {
+    match r.verified {
+        _ if r.timed_out => "**TIMED OUT**",
+        Some(true) => "VERIFIED",
+        Some(false) => "**FAILED**",
+        None => "no result",
+    }
+}
+
 /// The Markdown table of `rows`.
 fn table(rows: &[Row]) -> String {
     let mut out =
         String::from("| harness | result | checks | covers | time |\n|---|---|---|---|---|\n");
     let mut total = 0.0;
     for r in rows {
-        let result = match r.verified {
-            _ if r.timed_out => "**TIMED OUT**",
-            Some(true) => "VERIFIED",
-            Some(false) => "**FAILED**",
-            None => "no result",
-        };
+        let result = result_cell(r);
         let time = r.seconds.map_or("–".to_string(), |s| {
             total += s;
             format!("{s:.1} s")
@@ -105,6 +113,22 @@ fn table(rows: &[Row]) -> String {
 }
 
 fn kani_table(dir: &Path) -> Result<String, String> {
+    let rows = kani_rows(dir)?;
+    let mut out = String::new();
+    if let Some(secs) = wall_seconds(dir) {
+        let _ = writeln!(
+            out,
+            "Wall-clock time of this `cargo kani` step: {} min {:02} s.\n",
+            secs / 60,
+            secs % 60
+        );
+    }
+    out.push_str(&table(&rows));
+    Ok(out)
+}
+
+/// The rows of the result files in `dir`, in name order.
+fn kani_rows(dir: &Path) -> Result<Vec<Row>, String> {
     let entries = std::fs::read_dir(dir).map_err(|e| format!("{}: {e}", dir.display()))?;
     let mut rows = Vec::new();
     for entry in entries {
@@ -134,17 +158,66 @@ fn kani_table(dir: &Path) -> Result<String, String> {
             pair.0.harness
         ));
     }
-    let mut out = String::new();
-    if let Some(secs) = wall_seconds(dir) {
-        let _ = writeln!(
-            out,
-            "Wall-clock time of this `cargo kani` step: {} min {:02} s.\n",
-            secs / 60,
-            secs % 60
-        );
+    Ok(rows)
+}
+
+/// `cargo xtask kani-table --check DIR…`: what differs between the runs whose results are in the
+/// directories and REPORT.md's generated tables (`doc`), one line per difference. Each harness of
+/// the runs must have a row of the same result, checks and covers (times differ from run to run and
+/// are not compared), except those on the report's `Not in this run:` line; each row must be a
+/// harness of the runs. The check counts and covers of one program are the same in every run.
+fn kani_check(doc: &str, runs: &[Row]) -> Vec<String> {
+    let mut problems = Vec::new();
+    let block = match (doc.find(KANI_BEGIN), doc.find(KANI_END)) {
+        (Some(b), Some(e)) if b < e => doc.get(b..e).unwrap_or(""),
+        _ => return vec!["proofs/REPORT.md: no generated Kani tables".into()],
+    };
+    // (harness, result, checks, covers) of each row of the report's tables.
+    let mut rows: Vec<[String; 4]> = Vec::new();
+    for line in block.lines().filter(|l| l.starts_with("| `")) {
+        let cells: Vec<String> = line
+            .split('|')
+            .map(|c| c.trim().trim_matches('`').to_string())
+            .collect();
+        if let [_, h, r, c, v, ..] = cells.as_slice() {
+            rows.push([h.clone(), r.clone(), c.clone(), v.clone()]);
+        }
     }
-    out.push_str(&table(&rows));
-    Ok(out)
+    let not_in_run: Vec<&str> = doc
+        .lines()
+        .find_map(|l| l.strip_prefix("Not in this run:"))
+        .map(|rest| rest.split('`').skip(1).step_by(2).collect())
+        .unwrap_or_default();
+    for r in runs {
+        let want = [
+            r.harness.clone(),
+            result_cell(r).to_string(),
+            r.checks.clone().unwrap_or_else(|| "–".into()),
+            r.covers.clone().unwrap_or_else(|| "–".into()),
+        ];
+        match rows.iter().find(|row| row[0] == r.harness) {
+            Some(row) if *row == want => {}
+            Some(row) => problems.push(format!(
+                "proofs/REPORT.md: `{}` reads {} / {} / {}, this run {} / {} / {} \
+                 (regenerate: cargo xtask kani-table --write DIR…)",
+                r.harness, row[1], row[2], row[3], want[1], want[2], want[3]
+            )),
+            None if not_in_run.contains(&r.harness.as_str()) => {}
+            None => problems.push(format!(
+                "proofs/REPORT.md: `{}` ran but has no row and is not on the `Not in this run:` line",
+                r.harness
+            )),
+        }
+    }
+    for row in &rows {
+        if !runs.iter().any(|r| r.harness == row[0]) {
+            problems.push(format!(
+                "proofs/REPORT.md: `{}` has a row but did not run",
+                row[0]
+            ));
+        }
+    }
+    problems
 }
 
 /// The wall-clock seconds of the run whose results are in `dir`, from the file `<dir>.seconds`
@@ -300,6 +373,42 @@ fn main() -> ExitCode {
                 }
             }
         }
+        ["kani-table", "--check", dirs @ ..] if !dirs.is_empty() => {
+            let root = workspace_root();
+            let path = root.join("proofs/REPORT.md");
+            let doc = match std::fs::read_to_string(&path) {
+                Ok(d) => d,
+                Err(e) => {
+                    eprintln!("xtask kani-table: {}: {e}", path.display());
+                    return ExitCode::FAILURE;
+                }
+            };
+            let mut runs = Vec::new();
+            for d in dirs {
+                match kani_rows(Path::new(d)) {
+                    Ok(rows) => runs.extend(rows),
+                    Err(e) => {
+                        eprintln!("xtask kani-table: {e}");
+                        return ExitCode::FAILURE;
+                    }
+                }
+            }
+            let problems = kani_check(&doc, &runs);
+            for p in &problems {
+                eprintln!("{p}");
+            }
+            if problems.is_empty() {
+                println!(
+                    "xtask kani-table: proofs/REPORT.md's tables agree with this run ({} harnesses: \
+                     result, checks, covers)",
+                    runs.len()
+                );
+                ExitCode::SUCCESS
+            } else {
+                eprintln!("xtask kani-table: {} difference(s)", problems.len());
+                ExitCode::FAILURE
+            }
+        }
         ["kani-table", dir] => match kani_table(Path::new(dir)) {
             Ok(t) => {
                 print!("{t}");
@@ -427,6 +536,42 @@ mod tests {
             std::fs::write(dir.join(name), text).unwrap();
         }
         dir
+    }
+
+    #[test]
+    fn the_check_compares_result_checks_and_covers_but_not_times() {
+        let row = |h: &str, checks: &str| Row {
+            harness: h.into(),
+            verified: Some(true),
+            checks: Some(checks.into()),
+            covers: Some("2 of 2 satisfied".into()),
+            seconds: Some(9.0),
+            timed_out: false,
+        };
+        let doc = format!(
+            "Not in this run: `verify_new`.\n{KANI_BEGIN}\n| harness | result | checks | covers | time |\n\
+             |---|---|---|---|---|\n| `verify_a` | VERIFIED | 0 of 5 failed | 2 of 2 satisfied | 1.0 s |\n\
+             | `verify_b` | VERIFIED | 0 of 7 failed | 2 of 2 satisfied | 3.0 s |\n{KANI_END}\n"
+        );
+        // The same figures at other times, and a harness the report says was added after its run.
+        let same = [
+            row("verify_a", "0 of 5 failed"),
+            row("verify_b", "0 of 7 failed"),
+            row("verify_new", "0 of 1 failed"),
+        ];
+        assert!(kani_check(&doc, &same).is_empty());
+        // One check more, a harness gone, a harness new and not declared, a failure.
+        let changed = [row("verify_a", "0 of 6 failed"), row("verify_c", "0 of 1 failed")];
+        let p = kani_check(&doc, &changed);
+        assert_eq!(p.len(), 3, "{p:?}");
+        assert!(p[0].contains("`verify_a` reads VERIFIED / 0 of 5 failed"), "{p:?}");
+        assert!(p[1].contains("`verify_c` ran but has no row"), "{p:?}");
+        assert!(p[2].contains("`verify_b` has a row but did not run"), "{p:?}");
+        let mut failed = row("verify_a", "0 of 5 failed");
+        failed.verified = Some(false);
+        let p = kani_check(&doc, &[failed, row("verify_b", "0 of 7 failed")]);
+        assert_eq!(p.len(), 1, "{p:?}");
+        assert!(p[0].contains("this run **FAILED**"), "{p:?}");
     }
 
     #[test]
