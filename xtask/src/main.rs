@@ -523,7 +523,7 @@ fn main() -> ExitCode {
 }
 
 #[cfg(test)]
-#[allow(clippy::unwrap_used)]
+#[allow(clippy::unwrap_used, clippy::indexing_slicing)]
 mod tests {
     use super::*;
 
@@ -561,12 +561,21 @@ mod tests {
         ];
         assert!(kani_check(&doc, &same).is_empty());
         // One check more, a harness gone, a harness new and not declared, a failure.
-        let changed = [row("verify_a", "0 of 6 failed"), row("verify_c", "0 of 1 failed")];
+        let changed = [
+            row("verify_a", "0 of 6 failed"),
+            row("verify_c", "0 of 1 failed"),
+        ];
         let p = kani_check(&doc, &changed);
         assert_eq!(p.len(), 3, "{p:?}");
-        assert!(p[0].contains("`verify_a` reads VERIFIED / 0 of 5 failed"), "{p:?}");
+        assert!(
+            p[0].contains("`verify_a` reads VERIFIED / 0 of 5 failed"),
+            "{p:?}"
+        );
         assert!(p[1].contains("`verify_c` ran but has no row"), "{p:?}");
-        assert!(p[2].contains("`verify_b` has a row but did not run"), "{p:?}");
+        assert!(
+            p[2].contains("`verify_b` has a row but did not run"),
+            "{p:?}"
+        );
         let mut failed = row("verify_a", "0 of 5 failed");
         failed.verified = Some(false);
         let p = kani_check(&doc, &[failed, row("verify_b", "0 of 7 failed")]);
