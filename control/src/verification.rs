@@ -162,7 +162,7 @@ const GEOMETRIES: [(Q, Q); 6] = [
 pub fn kinematics_total(src: &mut impl Source) {
     for &(base, radius) in &GEOMETRIES {
         let Ok(k) = DiffDrive::new(base, radius) else {
-            fail!("a listed geometry was refused");
+            fail!("P-12: a listed geometry was refused");
         };
         let t = Twist {
             v: q(src),
@@ -396,22 +396,31 @@ pub fn profile_stays_within_travel(src: &mut impl Source) {
     let pos = p.step(target, cap, &lim);
     let (lo, hi) = (lim.travel.lo, lim.travel.hi);
     let t = lim.travel.clamp(target);
-    check!(pos == p.position(), "profile step returns the new position");
+    check!(
+        pos == p.position(),
+        "INV-20: profile step returns the new position"
+    );
     check!(
         pos >= lo && pos <= hi,
-        "profile position stays within travel"
+        "INV-20: profile position stays within travel"
     );
-    check!(p.is_valid(&lim), "profile position stays within travel");
+    check!(
+        p.is_valid(&lim),
+        "INV-20: profile position stays within travel"
+    );
     // At or below the target before → at or below after; at or above (position ≥ t, as t has no
     // sub-steps) → at or above.
     if at_or_below(&before, t) {
         check!(
             at_or_below(&p, t) && pos <= t,
-            "profile never passes the target from below"
+            "INV-20: profile never passes the target from below"
         );
     }
     if before.position() >= t {
-        check!(pos >= t, "profile never passes the target from above");
+        check!(
+            pos >= t,
+            "INV-20: profile never passes the target from above"
+        );
     }
     let moved = p.position() != before.position() || p.remainder() != before.remainder();
     cover!(src, on(&p, t) && !on(&before, t), "arrived at the target");
@@ -446,7 +455,7 @@ pub fn profile_speed_within_cap(src: &mut impl Source) {
     p.step(target, cap, &lim);
     let (v0, v1) = (before.velocity(), p.velocity());
     let c = cap.max(Q::ZERO);
-    check!(within(v1, c), "profile speed stays within the cap");
+    check!(within(v1, c), "INV-20: profile speed stays within the cap");
     let a = lim.accel_step;
     let dv = i64::from(v1.to_bits()).wrapping_sub(i64::from(v0.to_bits()));
     let smooth = dv.unsigned_abs() <= u64::from(a.unsigned_abs().to_bits());
@@ -459,7 +468,7 @@ pub fn profile_speed_within_cap(src: &mut impl Source) {
     let stopped_at_limit = (on(&p, lo) || on(&p, hi)) && within(v1, a);
     check!(
         smooth || forced || stopped_on_target || stopped_at_limit,
-        "profile velocity changes by at most accel_step unless the cap or a stop forces it"
+        "INV-20: profile velocity changes by at most accel_step unless the cap or a stop forces it"
     );
     let toward = (at_or_below(&before, t) && !on(&before, t) && v0 > Q::ZERO)
         || (before.position() >= t && !on(&before, t) && v0 < Q::ZERO);
