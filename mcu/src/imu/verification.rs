@@ -134,7 +134,7 @@ pub(super) fn check_output(d: &ImuData) {
     check!(d.temperature.is_finite(), "P-23: temperature finite");
 }
 
-/// P-23: The fusion's outputs stay finite and within their ranges ([`check_output`]) for any sample
+/// P-23: The fusion's outputs stay finite and within their ranges (`check_output`) for any sample
 /// rate, orientation and raw readings, with lost periods among them (a lost reading has accuracy 0).
 pub fn update_output_finite_and_bounded(src: &mut impl Source) {
     // Small rates reach the end of the start-up window within the few readings of a case.
