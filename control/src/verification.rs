@@ -162,7 +162,7 @@ const GEOMETRIES: [(Q, Q); 6] = [
 pub fn kinematics_total(src: &mut impl Source) {
     for &(base, radius) in &GEOMETRIES {
         let Ok(k) = DiffDrive::new(base, radius) else {
-            fail!("a listed geometry was refused");
+            fail!("P-12: a listed geometry was refused");
         };
         let t = Twist {
             v: q(src),
@@ -396,22 +396,31 @@ pub fn profile_stays_within_travel(src: &mut impl Source) {
     let pos = p.step(target, cap, &lim);
     let (lo, hi) = (lim.travel.lo, lim.travel.hi);
     let t = lim.travel.clamp(target);
-    check!(pos == p.position(), "profile step returns the new position");
+    check!(
+        pos == p.position(),
+        "INV-20: profile step returns the new position"
+    );
     check!(
         pos >= lo && pos <= hi,
-        "profile position stays within travel"
+        "INV-20: profile position stays within travel"
     );
-    check!(p.is_valid(&lim), "profile position stays within travel");
+    check!(
+        p.is_valid(&lim),
+        "INV-20: profile position stays within travel"
+    );
     // At or below the target before → at or below after; at or above (position ≥ t, as t has no
     // sub-steps) → at or above.
     if at_or_below(&before, t) {
         check!(
             at_or_below(&p, t) && pos <= t,
-            "profile never passes the target from below"
+            "INV-20: profile never passes the target from below"
         );
     }
     if before.position() >= t {
-        check!(pos >= t, "profile never passes the target from above");
+        check!(
+            pos >= t,
+            "INV-20: profile never passes the target from above"
+        );
     }
     let moved = p.position() != before.position() || p.remainder() != before.remainder();
     cover!(src, on(&p, t) && !on(&before, t), "arrived at the target");
@@ -446,7 +455,7 @@ pub fn profile_speed_within_cap(src: &mut impl Source) {
     p.step(target, cap, &lim);
     let (v0, v1) = (before.velocity(), p.velocity());
     let c = cap.max(Q::ZERO);
-    check!(within(v1, c), "profile speed stays within the cap");
+    check!(within(v1, c), "INV-20: profile speed stays within the cap");
     let a = lim.accel_step;
     let dv = i64::from(v1.to_bits()).wrapping_sub(i64::from(v0.to_bits()));
     let smooth = dv.unsigned_abs() <= u64::from(a.unsigned_abs().to_bits());
@@ -459,7 +468,7 @@ pub fn profile_speed_within_cap(src: &mut impl Source) {
     let stopped_at_limit = (on(&p, lo) || on(&p, hi)) && within(v1, a);
     check!(
         smooth || forced || stopped_on_target || stopped_at_limit,
-        "profile velocity changes by at most accel_step unless the cap or a stop forces it"
+        "INV-20: profile velocity changes by at most accel_step unless the cap or a stop forces it"
     );
     let toward = (at_or_below(&before, t) && !on(&before, t) && v0 > Q::ZERO)
         || (before.position() >= t && !on(&before, t) && v0 < Q::ZERO);
@@ -504,7 +513,7 @@ pub fn toward_within_a_step(src: &mut impl Source) {
     let w = toward(u, d, a);
     check!(
         toward_gives(u, d, a, w),
-        "profile velocity chooser stays within accel_step of the speed, at rest on the target"
+        "INV-20: profile velocity chooser stays within accel_step of the speed, at rest on the target"
     );
     cover!(src, w == u + a && u > 0, "accelerating toward the target");
     cover!(src, w == u - a && u > 0, "braking by a full step");
@@ -544,11 +553,11 @@ pub fn profile_smooth_for_fixed_target(src: &mut impl Source, backward: bool) {
     let forced = v1.unsigned_abs() == c.unsigned_abs() && v1.unsigned_abs() < v0.unsigned_abs();
     check!(
         dv.unsigned_abs() <= a.unsigned_abs() || forced,
-        "profile velocity changes by at most accel_step unless the cap forces it"
+        "P-20: profile velocity changes by at most accel_step unless the cap forces it"
     );
     check!(
         p.can_stop(target, &lim),
-        "profile can still stop before the target and the limits"
+        "P-20: profile can still stop before the target and the limits"
     );
     let t = lim.travel.clamp(target);
     let (below, above) = (before.position() < t, !at_or_below(&before, t));
@@ -728,7 +737,7 @@ pub(crate) mod stand_in {
     pub(crate) fn sub_steps(p: i32, f: u16) -> i64 {
         check!(
             f < 1000,
-            "an exact position is asked only for a remainder below a step"
+            "INV-20/P-20: an exact position is asked only for a remainder below a step"
         );
         // SAFETY: as in `uninterpreted`.
         let placed = unsafe { &mut *core::ptr::addr_of_mut!(PLACED) };
@@ -751,7 +760,7 @@ pub(crate) mod stand_in {
             Some(slot) => *slot = Some((p, f, x)),
             None => check!(
                 false,
-                "the exact-position stand-in remembers every position asked"
+                "INV-20/P-20: the exact-position stand-in remembers every position asked"
             ),
         }
         x

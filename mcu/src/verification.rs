@@ -43,20 +43,23 @@ pub fn current_loop_safe(src: &mut impl Source) {
     for k in b.compares {
         check!(
             k.a <= arr && k.b <= arr,
-            "compares stay within the auto-reload"
+            "P-13: compares stay within the auto-reload"
         );
-        check!(k.a == 0 || k.b == 0, "never both high sides of one bridge");
+        check!(
+            k.a == 0 || k.b == 0,
+            "P-13: never both high sides of one bridge"
+        );
     }
     if s.tripped {
         check!(
             b.state == BridgeState::Brake,
-            "a trip brakes the bridge in the same run"
+            "P-13: a trip brakes the bridge in the same run"
         );
     }
     if b.state == BridgeState::Brake {
         check!(
             b.compares.iter().all(|k| k.a == 0 && k.b == 0),
-            "a braked bridge gets no compares"
+            "P-13: a braked bridge gets no compares"
         );
     }
     cover!(src, running && s.tripped, "trip while running");
@@ -85,11 +88,14 @@ pub fn speed_loop_bounded(src: &mut impl Source) {
     for i in s.refs {
         check!(
             control::within(i, limit),
-            "current reference within the speed loop's limit"
+            "P-14: current reference within the speed loop's limit"
         );
     }
     if setpoint.is_none() {
-        check!(s.refs == [Q::ZERO; 2], "no current asked for in BRAKE");
+        check!(
+            s.refs == [Q::ZERO; 2],
+            "P-14: no current asked for in BRAKE"
+        );
     }
     cover!(src, s.refs.contains(&limit), "reference saturated");
 }
@@ -108,11 +114,11 @@ pub fn estop_press_brakes_at_once(src: &mut impl Source) {
     if pressed {
         check!(
             b.state == BridgeState::Brake,
-            "a press brakes the bridge in its handler"
+            "P-15: a press brakes the bridge in its handler"
         );
         check!(
             e.poll(src.bool()) == Some(statemachine::Estop::Engage),
-            "a press is reported even if released before the tick"
+            "P-15: a press is reported even if released before the tick"
         );
     }
     cover!(src, pressed && was_running, "press while running");
@@ -128,7 +134,7 @@ pub fn micros_bounded(src: &mut impl Source) {
     let off = t.wrapping_sub(base);
     check!(
         off < 2000,
-        "time stamp within one tick after the counted ticks"
+        "P-16: time stamp within one tick after the counted ticks"
     );
     cover!(src, off >= 1000, "update pending counted");
 }
@@ -299,13 +305,16 @@ pub fn pi_spi_shutdown_bit_brakes_in_its_transfer(src: &mut impl Source) {
     let o = app.apply(&mut safety, raw, decoded);
     check!(
         o.out.mode == Mode::Brake && o.out.drive == Drive::Brake,
-        "the motor shutdown bit latches BRAKE in its own transfer"
+        "INV-21: the motor shutdown bit latches BRAKE in its own transfer"
     );
-    check!(o.motors_off, "the handler is told to turn the motors off");
+    check!(
+        o.motors_off,
+        "INV-21: the handler is told to turn the motors off"
+    );
     if raw.servos {
         check!(
             o.servos == ServoOutputs::OFF,
-            "the servo shutdown bit stops every servo and cuts the rail in its own transfer"
+            "INV-21: the servo shutdown bit stops every servo and cuts the rail in its own transfer"
         );
     }
     cover!(src, was_running, "shutdown while running");
@@ -348,27 +357,27 @@ pub fn pi_spi_refusal_changes_nothing(src: &mut impl Source) {
     let servo = *app.servo();
     let updates_before = *app.updates();
     let o = app.apply(&mut safety, raw, Err(reason));
-    check!(!o.accepted, "a refused buffer is not accepted");
+    check!(!o.accepted, "INV-22: a refused buffer is not accepted");
     // (Under Kani the ladder is not stepped: this one and the drive's are the ladder's proofs.)
     check!(
         safety.ladder().counters().valid_frames == frames,
-        "a refused buffer is no valid frame"
+        "INV-22: a refused buffer is no valid frame"
     );
     check!(
         app.loops().map(|l| l.gains()) == gains,
-        "a refused buffer changes no gain"
+        "INV-22: a refused buffer changes no gain"
     );
     check!(
         app.servo().modes == servo.modes && app.servo().pulses_us == servo.pulses_us,
-        "a refused buffer changes no servo command"
+        "INV-22: a refused buffer changes no servo command"
     );
     check!(
         *app.updates() == updates_before,
-        "a refused buffer takes no update flag"
+        "INV-22: a refused buffer takes no update flag"
     );
     check!(
         o.out == safety.output() && o.motors_off == (o.out.drive == Drive::Brake),
-        "the outcome reports the ladder's output"
+        "INV-22: the outcome reports the ladder's output"
     );
     #[cfg(kani)]
     {
@@ -376,7 +385,7 @@ pub fn pi_spi_refusal_changes_nothing(src: &mut impl Source) {
         let [first, second, count] = safety.seen;
         check!(
             count == 1 + u8::from(raw.motors),
-            "a refused buffer applies one event, two with its shutdown bit"
+            "INV-22: a refused buffer applies one event, two with its shutdown bit"
         );
         check!(
             if raw.motors {
@@ -385,17 +394,20 @@ pub fn pi_spi_refusal_changes_nothing(src: &mut impl Source) {
             } else {
                 first == refusal
             },
-            "a refused buffer applies its shutdown bit if set, then the refusal of its reason"
+            "INV-22: a refused buffer applies its shutdown bit if set, then the refusal of its reason"
         );
     }
     #[cfg(not(kani))]
     {
         if raw.motors {
-            check!(o.out.drive == Drive::Brake, "its shutdown bit still brakes");
+            check!(
+                o.out.drive == Drive::Brake,
+                "INV-22: its shutdown bit still brakes"
+            );
         } else {
             check!(
                 o.out.drive == before.drive,
-                "without the shutdown bit a refused buffer leaves the drive as it was"
+                "INV-22: without the shutdown bit a refused buffer leaves the drive as it was"
             );
         }
     }
@@ -445,22 +457,22 @@ pub fn pi_spi_gain_updates_stay_bounded(src: &mut impl Source) {
         #[allow(clippy::indexing_slicing, clippy::needless_range_loop)]
         for i in 0..crate::pi_spi::MOTORS {
             let g = &set[i];
-            check!(g.is_valid(), "accepted gains have valid limits");
+            check!(g.is_valid(), "INV-23: accepted gains have valid limits");
             check!(
                 g.out_limit == b.out_limit && g.i_limit == b.i_limit,
-                "accepted gains keep the board's limits"
+                "INV-23: accepted gains keep the board's limits"
             );
             check!(
                 g.kp >= Q::ZERO && g.ki_dt >= Q::ZERO && g.kd_dt >= Q::ZERO,
-                "accepted gains are never negative"
+                "INV-23: accepted gains are never negative"
             );
             let mut pid = Pid::new(*g);
             let u = pid.step(Q::from_bits(src.i32()), Q::from_bits(src.i32()));
             check!(
                 u <= b.out_limit && u >= b.out_limit.saturating_neg(),
-                "a controller from accepted gains stays within its output limit"
+                "INV-23: a controller from accepted gains stays within its output limit"
             );
-            check!(pid.is_valid(), "and within its integrator limit");
+            check!(pid.is_valid(), "INV-23: and within its integrator limit");
         }
     }
     cover!(src, r.is_ok(), "gains accepted");
@@ -532,7 +544,7 @@ pub fn odometry_configure_guarded(src: &mut impl Source) {
         let first = accepted_kinematics(src);
         check!(
             o.configure(&first).is_ok(),
-            "a folded configuration is accepted"
+            "P-19: a folded configuration is accepted"
         );
     }
     // Under Kani way 3 alone draws every configuration; the others steer the twin to the edges:
@@ -569,47 +581,47 @@ pub fn odometry_configure_guarded(src: &mut impl Source) {
         let entries = || k.inverse.iter().flatten();
         check!(
             entries().chain(&k.ticks_to_rad).all(|v| v.is_finite()),
-            "an accepted configuration is finite"
+            "P-19: an accepted configuration is finite"
         );
         check!(
             k.ticks_to_rad
                 .iter()
                 .all(|t| t.abs() >= MIN_TICKS_TO_RAD && t.abs() <= MAX_TICKS_TO_RAD),
-            "accepted ticks_to_rad within bounds"
+            "P-19: accepted ticks_to_rad within bounds"
         );
         check!(
             k.inverse
                 .iter()
                 .zip([MAX_LINEAR_GAIN, MAX_LINEAR_GAIN, MAX_YAW_GAIN])
                 .all(|(row, max)| row.iter().all(|a| a.abs() <= max)),
-            "accepted inverse entries within bounds"
+            "P-19: accepted inverse entries within bounds"
         );
         check!(
             entries().any(|a| *a != 0.0),
-            "an accepted matrix moves the robot"
+            "P-19: an accepted matrix moves the robot"
         );
         check!(
             o.config() == Some(&k),
-            "the accepted configuration is in force"
+            "P-19: the accepted configuration is in force"
         );
         check!(
             o.counters() == before.counters(),
-            "an accepted configuration counts nothing"
+            "P-19: an accepted configuration counts nothing"
         );
     } else {
         check!(
             o.config() == before.config(),
-            "a refused configuration leaves the one in force"
+            "P-19: a refused configuration leaves the one in force"
         );
         check!(
             o.counters().refused_configs == before.counters().refused_configs.saturating_add(1),
-            "a refused configuration is counted"
+            "P-19: a refused configuration is counted"
         );
     }
     let (now, then) = (o.data(), before.data());
     check!(
         now.pos_x == then.pos_x && now.pos_y == then.pos_y && now.heading == then.heading,
-        "configure keeps the pose"
+        "P-19: configure keeps the pose"
     );
     cover!(src, result.is_ok(), "accepted");
     cover!(
@@ -645,7 +657,7 @@ pub fn odometry_update_finite(src: &mut impl Source) {
     let mut o = Odometry::new();
     check!(
         o.configure(&k).is_ok(),
-        "a folded configuration is accepted"
+        "P-19: a folded configuration is accepted"
     );
     let mut counts = [src.i32(), src.i32(), src.i32(), src.i32()];
     let steps = if cfg!(kani) { 2 } else { 6 };
@@ -670,26 +682,26 @@ pub fn odometry_update_finite(src: &mut impl Source) {
             [d.pos_x, d.pos_y, d.heading, d.vx, d.vy, d.wz]
                 .iter()
                 .all(|v| v.is_finite()),
-            "odometry outputs are finite"
+            "P-19: odometry outputs are finite"
         );
         check!(
             d.heading > -PI && d.heading <= PI,
-            "heading within (-pi, pi]"
+            "P-19: heading within (-pi, pi]"
         );
         check!(
             d.pos_x.abs() <= MAX_POSITION_M && d.pos_y.abs() <= MAX_POSITION_M,
-            "position within its bound"
+            "P-19: position within its bound"
         );
         check!(
             o.counters().non_finite == 0,
-            "no result needs the non-finite guard"
+            "P-19: no result needs the non-finite guard"
         );
         if !(dt.is_finite() && dt >= MIN_DT_S) {
             refused = true;
-            check!(d == then, "a refused period changes nothing");
+            check!(d == then, "P-19: a refused period changes nothing");
             check!(
                 o.counters().refused_dt == seen.refused_dt.saturating_add(1),
-                "a refused period is counted"
+                "P-19: a refused period is counted"
             );
         }
         clamped |= o.counters().position_clamped > seen.position_clamped;
@@ -742,7 +754,7 @@ mod event_log {
         _safety: &mut crate::Safety<{ crate::pi_spi::MOTORS }>,
         _cmd: &protocol::pi_spi::RxBuffer,
     ) -> bool {
-        statemachine::fail!("a refused buffer is never taken")
+        statemachine::fail!("INV-22: a refused buffer is never taken")
     }
 }
 

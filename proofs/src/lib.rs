@@ -197,7 +197,7 @@ pub fn single_bit_flip_never_reaches_the_ladder(src: &mut impl Source) {
         *b ^= 1u8 << (bit % 8);
     }
     let (l, decoded) = receive(&l0, &frame);
-    check!(!decoded, "a single bit flip never decodes");
+    check!(!decoded, "INV-11: a single bit flip never decodes");
     check!(
         unchanged(&l0, &l),
         "INV-11: a flipped frame leaves the ladder unchanged but for its counters"
@@ -334,20 +334,23 @@ pub fn tick_drives_the_bridge_as_the_ladder_says(src: &mut impl Source) {
     let braked = bridge.state == BridgeState::Brake;
     check!(
         braked == (o.out.drive == Drive::Brake || pending),
-        "the bridge runs exactly when the ladder drives and no ESTOP press is pending"
+        "INV-13: the bridge runs exactly when the ladder drives and no ESTOP press is pending"
     );
     if safety.ladder().age() >= brake_after {
         check!(
             braked,
-            "the tick at age >= brake_after leaves the bridge braked"
+            "INV-13: the tick at age >= brake_after leaves the bridge braked"
         );
     }
     if braked {
-        check!(!bridge.tripped, "a braked tick clears the break flag");
+        check!(
+            !bridge.tripped,
+            "INV-13: a braked tick clears the break flag"
+        );
     }
     check!(
         o.brake_release == (o.out.mode != Mode::Brake),
-        "the holding brake is released only while the ladder drives"
+        "INV-13: the holding brake is released only while the ladder drives"
     );
     cover!(
         src,

@@ -158,7 +158,7 @@ fn invariant_kept<const N: usize>(src: &mut impl Source, s: &Step<N>) {
     let l0 = &s.l0;
     let l = &s.l;
     check!(l.is_valid(), "INV-0: step preserves the invariant");
-    check!(out == l.output(), "step returns the state's output");
+    check!(out == l.output(), "INV-0: step returns the state's output");
     let p = l.config().params();
     if out.age >= p.hold_after {
         check!(

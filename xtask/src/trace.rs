@@ -34,6 +34,15 @@
 //!   `assert!` or `panic!` (core's, in these `no_std` crates: Kani reports even a literal message
 //!   as the placeholder; `check!` and `fail!` pass it on), and no assertion without a message
 //!   (Kani reports only its condition). `const` assertions are the compiler's.
+//! - **Property messages.** There too, the message of every `check!` and `fail!` is a string
+//!   literal that starts with the ids of the properties it checks, `"INV-4: …"` or
+//!   `"INV-3/INV-16: …"`, each an id that a table of SAFETY.md defines (the first cell of a row), so
+//!   a failing proof names its property. [`UNNAMED_MESSAGES`] lists the exceptions, each with its
+//!   reason; an entry whose message no longer appears without an id is reported, to be removed.
+//! - **Covers.** Every row of the fresh-clone tables has covers, all satisfied ("n of n
+//!   satisfied"): a harness without a satisfied cover may be vacuous. [`COVERS_NOT_ALL_SATISFIED`]
+//!   lists the exceptions with the counts the tables must show and the reason each cover left is
+//!   unreachable by design; an entry that matches no such row is reported, to be removed.
 
 use std::collections::{BTreeMap, BTreeSet};
 use std::path::Path;
@@ -93,30 +102,16 @@ pub const TWIN_OF: &[(&str, &str, &str, &str)] = &[
         "profile_smooth_for_fixed_target",
         "one Kani entry per direction of the velocity (down, or at rest and up); the twin runs both",
     ),
-    (
-        "protocol/src/crc16/verification.rs",
-        "verify_bursts_detected_*",
-        "bursts_detected",
-        "one Kani entry per byte order; the twin runs both",
-    ),
 ];
 
 /// Kani harnesses without a `cargo test` twin of their own: (file, harness, why).
-pub const NO_TWIN: &[(&str, &str, &str)] = &[
-    (
-        "protocol/src/crc16/verification.rs",
-        "verify_fold*_total",
-        "contract proofs of the CRC's block functions; `seed_loop_is_checksum` runs every block \
+pub const NO_TWIN: &[(&str, &str, &str)] = &[(
+    "protocol/src/crc16/verification.rs",
+    "verify_fold*_total",
+    "contract proofs of the CRC's block functions; `seed_loop_is_checksum` runs every block \
          function against the bitwise loop at every frame length, `checksum_total` is the twin of \
          the function built from them",
-    ),
-    (
-        "protocol/src/amr/verification.rs",
-        "verify_seal_open_real_crc",
-        "the same body as `verify_seal_open` with the real CRC; the twin `seal_open` runs that body \
-         with the real CRC already (stubs apply under Kani only)",
-    ),
-];
+)];
 
 /// Tests that enumerate their whole input space (a claim they back is EXHAUSTIVE).
 pub const EXHAUSTIVE: &[&str] = &[
@@ -133,6 +128,53 @@ pub const EXHAUSTIVE: &[&str] = &[
     "bit_flip_refused_for_every_bit",
     "bit_flip_in_every_sample_for_every_bit",
     "robust_holds_back_no_frame_after_every_byte",
+];
+
+/// `check!`/`fail!` messages left without a property id: (file, message, why). Each is matched
+/// by its whole text, so a message changed or given its id makes the entry stale (reported).
+/// None at present: every message names its property.
+pub const UNNAMED_MESSAGES: &[(&str, &str, &str)] = &[];
+
+/// Fresh-clone rows whose covers are not all satisfied, or which have none: (harness or prefix
+/// ending in `*`, covers satisfied, covers reported, why the others cannot be reached). The
+/// table's counts must be exactly these.
+pub const COVERS_NOT_ALL_SATISFIED: &[(&str, u32, u32, &str)] = &[
+    (
+        "verify_len_flip_*",
+        1,
+        4,
+        "`check_bit_flip_detected_in` has one cover for a flip of the LEN byte (\"LEN made longer\", \
+         satisfied) and three in the branch of `Flip::OtherBytes` (\"flip in SOF\", \"flip in \
+         MSG_ID\", \"flip in CRC\"), which these entries never take: each flips the LEN byte \
+         (`Flip::LenByte`). The test `bit_flip_in_every_sample_for_every_bit` enumerates every flip \
+         of the other bytes, where those three fire",
+    ),
+    (
+        "verify_may_start",
+        2,
+        3,
+        "`check_may_start` has two covers (\"a header whose frame ends later\", \"a lone AA\"); Kani \
+         reports one of them twice, one copy satisfied and the other unsatisfiable, so both covers \
+         are satisfied (proofs/REPORT.md, the single-harness row of `cdc::verify_may_start`)",
+    ),
+    (
+        "verify_stream_holds_back_no_frame_*",
+        2,
+        4,
+        "under Kani the garbage before the frame is three bytes (`GARBAGE`); \"frame delivered after \
+         a crc error\" and \"the garbage began a valid frame\" need a candidate from the garbage \
+         that ends inside the frame, whose LEN takes a fourth garbage byte (with three, its LEN is \
+         the frame's `AA`, which ends past the frame). The twins (up to 24 garbage bytes) and the \
+         exhaustive test `stream_holds_back_no_frame_exhaustively` reach both",
+    ),
+    (
+        "verify_fold*_total",
+        0,
+        0,
+        "contract proofs (`proof_for_contract`) of the CRC's block functions, without `cover!`: \
+         register and block are `kani::any()`, with no assumption and no precondition, so no \
+         input is excluded and the proof cannot be vacuous",
+    ),
 ];
 
 /// One Kani harness found in the code.
@@ -704,6 +746,21 @@ pub struct Fresh {
     pub not_run: BTreeSet<String>,
     /// The `Stale rows:` line: rows whose harness was removed or made pending since the run.
     pub stale: BTreeSet<String>,
+    /// Harness → (covers satisfied, covers reported), for the rows of tables with a `covers`
+    /// column (`–`, no covers, is (0, 0)); stale rows left out.
+    pub covers: BTreeMap<String, (u32, u32)>,
+}
+
+/// A covers cell: `n of m satisfied` → (n, m); anything else (`–`) → no covers, (0, 0).
+fn covers_of(cell: &str) -> (u32, u32) {
+    let mut parts = cell.split_whitespace();
+    let n = parts.next().and_then(|n| n.parse().ok());
+    let of = parts.next();
+    let m = parts.next().and_then(|m| m.parse().ok());
+    match (n, of, m) {
+        (Some(n), Some("of"), Some(m)) => (n, m),
+        _ => (0, 0),
+    }
 }
 
 /// The backticked `verify_…` names of a line.
@@ -717,9 +774,11 @@ fn harness_names(l: &str) -> impl Iterator<Item = String> + '_ {
 /// Reads REPORT.md's "Fresh-clone tables" section.
 pub fn fresh_clone(report: &str) -> Fresh {
     let mut results = BTreeMap::new();
+    let mut covers = BTreeMap::new();
     let mut not_run = BTreeSet::new();
     let mut stale = BTreeSet::new();
     let mut inside = false;
+    let mut covers_col = None;
     for l in report.lines() {
         if l.starts_with("## ") {
             inside = l.starts_with("## Fresh-clone tables");
@@ -734,6 +793,11 @@ pub fn fresh_clone(report: &str) -> Fresh {
                 let h = h.trim_matches('`');
                 if h.starts_with("verify_") {
                     results.insert(h.to_string(), r == "VERIFIED");
+                    if let Some(cell) = covers_col.and_then(|k| c.get(k).map(String::as_str)) {
+                        covers.insert(h.to_string(), covers_of(cell));
+                    }
+                } else if h == "harness" {
+                    covers_col = c.iter().position(|x| x == "covers");
                 }
             }
         } else if l.starts_with("Not in this run:") {
@@ -744,11 +808,13 @@ pub fn fresh_clone(report: &str) -> Fresh {
     }
     let rows = results.keys().cloned().collect();
     results.retain(|h, _| !stale.contains(h));
+    covers.retain(|h, _| !stale.contains(h));
     Fresh {
         results,
         rows,
         not_run,
         stale,
+        covers,
     }
 }
 
@@ -839,21 +905,15 @@ fn bad_assertion(stmt: &str) -> Option<&'static str> {
     None
 }
 
-/// The assertion problems of one verification file: (line number, what).
-fn assertion_problems(text: &str) -> Vec<(usize, &'static str)> {
-    let raw: Vec<&str> = text.lines().collect();
-    let lines: Vec<String> = raw.iter().map(|l| code_only(l)).collect();
-    let mut skip_until = None;
+/// The `#[cfg(test)]` items of a file (test modules and test helpers, which Kani never compiles):
+/// (first line, last line), 0-based, inclusive.
+fn test_items(raw: &[&str], lines: &[String]) -> Vec<(usize, usize)> {
     let mut out = Vec::new();
     let mut i = 0;
     while i < raw.len() {
-        if skip_until.is_some_and(|e| i <= e) {
-            i = i.saturating_add(1);
-            continue;
-        }
         let t = raw.get(i).map_or("", |l| l.trim());
         if t.starts_with("#[cfg(test)]") {
-            // skip the item that follows (a test module or test helper)
+            // the item that follows, after its other attributes and comments
             let mut j = i.saturating_add(1);
             while raw
                 .get(j)
@@ -861,8 +921,23 @@ fn assertion_problems(text: &str) -> Vec<(usize, &'static str)> {
             {
                 j = j.saturating_add(1);
             }
-            skip_until = Some(block_end(&lines, j));
-            i = j;
+            let end = block_end(lines, j);
+            out.push((i, end));
+            i = end;
+        }
+        i = i.saturating_add(1);
+    }
+    out
+}
+
+/// The assertion problems of one verification file: (line number, what).
+fn assertion_problems(text: &str) -> Vec<(usize, &'static str)> {
+    let raw: Vec<&str> = text.lines().collect();
+    let lines: Vec<String> = raw.iter().map(|l| code_only(l)).collect();
+    let skipped = test_items(&raw, &lines);
+    let mut out = Vec::new();
+    for i in 0..raw.len() {
+        if skipped.iter().any(|(s, e)| (*s..=*e).contains(&i)) {
             continue;
         }
         let c = lines.get(i).map_or("", String::as_str);
@@ -886,13 +961,267 @@ fn assertion_problems(text: &str) -> Vec<(usize, &'static str)> {
                 out.push((i.saturating_add(1), what));
             }
         }
-        i = i.saturating_add(1);
     }
     out
 }
 
-/// Every problem found, one line each (empty: the safety case, the report and the code agree).
+/// A character that continues an identifier.
+fn ident_char(c: char) -> bool {
+    c.is_ascii_alphanumeric() || c == '_'
+}
+
+/// A `check!` or `fail!` invocation: 0-based line of its name, the macro, and the string
+/// literals directly among its arguments (as written, escapes included).
+type MacroCall = (usize, &'static str, Vec<String>);
+
+/// The `check!` and `fail!` invocations of a file, outside comments and literals.
+fn macro_calls(text: &str) -> Vec<MacroCall> {
+    let cs: Vec<char> = text.chars().collect();
+    let at = |k: usize| cs.get(k).copied().unwrap_or('\0');
+    let mut out = Vec::new();
+    // open invocations: (line, macro, bracket depth inside its parentheses, literals)
+    let mut open: Vec<MacroCall> = Vec::new();
+    let mut depths: Vec<usize> = Vec::new();
+    let mut depth = 0usize;
+    let mut line = 0usize;
+    let mut i = 0usize;
+    while i < cs.len() {
+        let c = at(i);
+        let next = at(i.saturating_add(1));
+        let prev = if i == 0 {
+            '\0'
+        } else {
+            at(i.saturating_sub(1))
+        };
+        if c == '\n' {
+            line = line.saturating_add(1);
+            i = i.saturating_add(1);
+        } else if c == '/' && next == '/' {
+            while i < cs.len() && at(i) != '\n' {
+                i = i.saturating_add(1);
+            }
+        } else if c == '/' && next == '*' {
+            i = i.saturating_add(2);
+            while i < cs.len() && !(at(i) == '*' && at(i.saturating_add(1)) == '/') {
+                if at(i) == '\n' {
+                    line = line.saturating_add(1);
+                }
+                i = i.saturating_add(1);
+            }
+            i = i.saturating_add(2);
+        } else if c == '"' || (c == 'r' && !ident_char(prev) && matches!(next, '"' | '#')) {
+            // a string literal, or a raw one (`r"…"`, `r#"…"#`)
+            let mut hashes = 0usize;
+            let mut k = i;
+            if c == 'r' {
+                k = k.saturating_add(1);
+                while at(k) == '#' {
+                    hashes = hashes.saturating_add(1);
+                    k = k.saturating_add(1);
+                }
+                if at(k) != '"' {
+                    // a raw identifier, `r#name`
+                    i = k;
+                    continue;
+                }
+            }
+            let start = k.saturating_add(1);
+            let mut end = start;
+            loop {
+                let d = at(end);
+                if end >= cs.len() {
+                    break;
+                }
+                if c != 'r' && d == '\\' {
+                    end = end.saturating_add(2);
+                    continue;
+                }
+                if d == '"' && (1..=hashes).all(|h| at(end.saturating_add(h)) == '#') {
+                    break;
+                }
+                end = end.saturating_add(1);
+            }
+            let lit: String = cs
+                .get(start..end.min(cs.len()))
+                .unwrap_or(&[])
+                .iter()
+                .collect();
+            line = line.saturating_add(lit.matches('\n').count());
+            if let (Some(call), Some(d)) = (open.last_mut(), depths.last()) {
+                if *d == depth {
+                    call.2.push(lit);
+                }
+            }
+            i = end.saturating_add(1).saturating_add(hashes);
+        } else if c == '\'' {
+            // a char literal (`'x'`, `'\n'`, `'\u{…}'`), else a lifetime
+            if next == '\\' {
+                let mut k = i.saturating_add(2);
+                while k < cs.len() && at(k) != '\'' {
+                    k = k.saturating_add(1);
+                }
+                i = k.saturating_add(1);
+            } else if at(i.saturating_add(2)) == '\'' {
+                i = i.saturating_add(3);
+            } else {
+                i = i.saturating_add(1);
+            }
+        } else if (c.is_ascii_alphabetic() || c == '_') && !ident_char(prev) && prev != '$' {
+            let start = i;
+            while ident_char(at(i)) {
+                i = i.saturating_add(1);
+            }
+            let word: String = cs.get(start..i).unwrap_or(&[]).iter().collect();
+            let name = match word.as_str() {
+                "check" => Some("check"),
+                "fail" => Some("fail"),
+                _ => None,
+            };
+            if let Some(name) = name.filter(|_| at(i) == '!' && at(i.saturating_add(1)) == '(') {
+                depth = depth.saturating_add(1);
+                open.push((line, name, Vec::new()));
+                depths.push(depth);
+                i = i.saturating_add(2);
+            }
+        } else {
+            match c {
+                '(' | '[' | '{' => depth = depth.saturating_add(1),
+                ')' | ']' | '}' => {
+                    if depths.last() == Some(&depth) {
+                        depths.pop();
+                        if let Some(call) = open.pop() {
+                            out.push(call);
+                        }
+                    }
+                    depth = depth.saturating_sub(1);
+                }
+                _ => {}
+            }
+            i = i.saturating_add(1);
+        }
+    }
+    out
+}
+
+/// The property ids (`INV-4`, `P-2`, and the requirements' `SR-12`) that a table of SAFETY.md
+/// defines: the ids in the first cell of each row.
+fn defined_ids(safety: &str) -> BTreeSet<String> {
+    let lines: Vec<&str> = safety.lines().collect();
+    let mut out = BTreeSet::new();
+    for (_, rows) in tables(&lines) {
+        for (c, _) in rows {
+            let first = c.first().map_or("", String::as_str);
+            for (pos, w) in words(first) {
+                if matches!(w, "INV" | "P" | "SR") {
+                    out.extend(ids(first.get(pos..).unwrap_or(""), w).into_iter().take(1));
+                }
+            }
+        }
+    }
+    out
+}
+
+/// The ids a message starts with: `"INV-3/INV-16: …"` (or `"INV-10, INV-11: …"`) gives INV-3 and
+/// INV-16; `None` when it does not start with ids and `": "`.
+fn message_ids(msg: &str) -> Option<Vec<String>> {
+    let (head, rest) = msg.split_once(':')?;
+    if !rest.starts_with(' ') {
+        return None;
+    }
+    let mut out = Vec::new();
+    for part in head.split(['/', ',']) {
+        let part = part.trim();
+        let (p, n) = part.split_once('-')?;
+        let prefix = !p.is_empty() && p.chars().all(|c| c.is_ascii_uppercase());
+        let number = !n.is_empty() && n.chars().all(|c| c.is_ascii_digit());
+        if !(prefix && number) {
+            return None;
+        }
+        out.push(part.to_string());
+    }
+    Some(out)
+}
+
+/// The message problems of one verification file (`file:line: what`), with the `allowed`
+/// messages without an id that it carries (`(file, message)`).
+fn message_problems<'a>(
+    file: &str,
+    text: &str,
+    known: &BTreeSet<String>,
+    allowed: &[(&'a str, &'a str, &'a str)],
+    used: &mut BTreeSet<(&'a str, &'a str)>,
+) -> Vec<String> {
+    let raw: Vec<&str> = text.lines().collect();
+    let lines: Vec<String> = raw.iter().map(|l| code_only(l)).collect();
+    let skipped = test_items(&raw, &lines);
+    let mut out = Vec::new();
+    for (line, name, lits) in macro_calls(text) {
+        if skipped.iter().any(|(s, e)| (*s..=*e).contains(&line)) {
+            continue;
+        }
+        let at = format!("{file}:{}: `{name}!`", line.saturating_add(1));
+        let Some(msg) = lits.last() else {
+            out.push(format!(
+                "{at} has no string literal message naming its property"
+            ));
+            continue;
+        };
+        match message_ids(msg) {
+            None => {
+                if let Some((f, m, _)) = allowed
+                    .iter()
+                    .find(|(f, m, _)| *f == file && *m == msg.as_str())
+                {
+                    used.insert((f, m));
+                } else {
+                    out.push(format!(
+                        "{at} message \"{}\" does not start with a property id of proofs/SAFETY.md (\"INV-n: …\", \"P-n: …\")",
+                        short(msg)
+                    ));
+                }
+            }
+            Some(ids) => {
+                for id in ids.iter().filter(|id| !known.contains(*id)) {
+                    out.push(format!(
+                        "{at} message names {id}, which no table of proofs/SAFETY.md defines"
+                    ));
+                }
+            }
+        }
+    }
+    out
+}
+
+/// The exceptions the rules allow (the repository's: [`REPOSITORY`]).
+#[derive(Debug, Clone, Copy)]
+pub struct Allowed<'a> {
+    /// `check!`/`fail!` messages without a property id: (file, message, why).
+    pub unnamed_messages: &'a [(&'a str, &'a str, &'a str)],
+    /// Fresh-clone rows with covers not all satisfied, or none: (harness or `*` prefix, satisfied,
+    /// reported, why).
+    pub covers: &'a [(&'a str, u32, u32, &'a str)],
+}
+
+/// The repository's exceptions.
+pub const REPOSITORY: Allowed<'static> = Allowed {
+    unnamed_messages: UNNAMED_MESSAGES,
+    covers: COVERS_NOT_ALL_SATISFIED,
+};
+
+/// Every problem found, one line each (empty: the safety case, the report and the code agree),
+/// with the repository's exceptions.
 pub fn check(safety: &str, report: &str, code: &Code, sources: &[(String, String)]) -> Vec<String> {
+    check_allowing(safety, report, code, sources, REPOSITORY)
+}
+
+/// Every problem found, with the exceptions `allowed`.
+pub fn check_allowing(
+    safety: &str,
+    report: &str,
+    code: &Code,
+    sources: &[(String, String)],
+    allowed: Allowed<'_>,
+) -> Vec<String> {
     let mut problems = Vec::new();
     let s = "proofs/SAFETY.md";
     let r = "proofs/REPORT.md";
@@ -1010,7 +1339,6 @@ pub fn check(safety: &str, report: &str, code: &Code, sources: &[(String, String
             ));
         }
     }
-
     // hazards → requirements
     let hazards: Vec<String> = tables(&section(safety, "2"))
         .iter()
@@ -1154,10 +1482,61 @@ pub fn check(safety: &str, report: &str, code: &Code, sources: &[(String, String
         }
     }
 
-    // static failure messages
+    // every cover satisfied, but for the listed exceptions with their counts
+    for (name, &(sat, all)) in &fresh.covers {
+        if sat == all && all > 0 {
+            continue;
+        }
+        let entry = allowed
+            .covers
+            .iter()
+            .find(|(p, _, _, _)| glob_or_eq(p, name));
+        match entry {
+            None if all == 0 => problems.push(format!(
+                "{r}: fresh-clone row `{name}` has no covers: nothing shows that the harness is not vacuous (or list it with its reason in trace.rs's COVERS_NOT_ALL_SATISFIED)"
+            )),
+            None => problems.push(format!(
+                "{r}: fresh-clone row `{name}` has {sat} of {all} covers satisfied: an unsatisfied cover is a case the harness never reached (or list it with its reason in trace.rs's COVERS_NOT_ALL_SATISFIED)"
+            )),
+            Some((p, s, a, _)) if (*s, *a) != (sat, all) => problems.push(format!(
+                "{r}: fresh-clone row `{name}` has {sat} of {all} covers satisfied; COVERS_NOT_ALL_SATISFIED allows `{p}` {s} of {a}"
+            )),
+            Some(_) => {}
+        }
+    }
+    for (p, s, a, _) in allowed.covers {
+        let matched = fresh
+            .covers
+            .iter()
+            .any(|(name, &c)| glob_or_eq(p, name) && c == (*s, *a));
+        if !matched {
+            problems.push(format!(
+                "xtask/src/trace.rs: COVERS_NOT_ALL_SATISFIED allows `{p}` {s} of {a} covers, which no fresh-clone row shows: remove or correct the entry"
+            ));
+        }
+    }
+
+    // static failure messages, each naming its property
+    let known = defined_ids(safety);
+    let mut used = BTreeSet::new();
     for (f, text) in sources {
         for (line, what) in assertion_problems(text) {
             problems.push(format!("{f}:{line}: {what}"));
+        }
+        problems.extend(message_problems(
+            f,
+            text,
+            &known,
+            allowed.unnamed_messages,
+            &mut used,
+        ));
+    }
+    for (f, m, _) in allowed.unnamed_messages {
+        if !used.contains(&(*f, *m)) {
+            problems.push(format!(
+                "xtask/src/trace.rs: UNNAMED_MESSAGES lists \"{}\" of {f}, which no `check!` or `fail!` there carries without an id: remove the entry",
+                short(m)
+            ));
         }
     }
     problems
@@ -1225,7 +1604,35 @@ pub fn run(root: &Path) -> Result<Vec<String>, String> {
     let report = read("proofs/REPORT.md")?;
     let (files, others) = read_sources(root)?;
     let code = scan(&files, &others);
-    Ok(check(&safety, &report, &code, &files))
+    let mut problems = check(&safety, &report, &code, &files);
+    problems.extend(stale_twin_exceptions(&code, TWIN_OF, NO_TWIN));
+    Ok(problems)
+}
+
+/// The entries of `twin_of` ([`TWIN_OF`]) and `no_twin` ([`NO_TWIN`]) that name no harness of
+/// their file: a harness renamed or removed leaves its exception behind, which could then excuse
+/// another harness of the same name.
+pub fn stale_twin_exceptions(
+    code: &Code,
+    twin_of: &[(&str, &str, &str, &str)],
+    no_twin: &[(&str, &str, &str)],
+) -> Vec<String> {
+    twin_of
+        .iter()
+        .map(|(f, p, _, _)| (*f, *p))
+        .chain(no_twin.iter().map(|(f, p, _)| (*f, *p)))
+        .filter(|(f, p)| {
+            !code
+                .harnesses
+                .iter()
+                .any(|h| h.file == *f && glob_or_eq(p, &h.name))
+        })
+        .map(|(f, p)| {
+            format!(
+                "xtask/src/trace.rs: the twin exception `{p}` of {f} names no harness there: remove or correct it"
+            )
+        })
+        .collect()
 }
 
 #[cfg(test)]
@@ -1340,8 +1747,14 @@ Not in this run: `verify_round_trip_ping`, `verify_round_trip_ack`.
             ),
         ];
         let c = scan(&files, &BTreeSet::new());
-        check(safety, report, &c, &files)
+        check_allowing(safety, report, &c, &files, NONE)
     }
+
+    /// No exceptions (the repository's name files and harnesses the fixtures do not have).
+    const NONE: Allowed<'static> = Allowed {
+        unnamed_messages: &[],
+        covers: &[],
+    };
 
     /// Asserts that exactly the expected problem is reported.
     fn expect(got: &[String], wanted: &str) {
@@ -1605,6 +2018,174 @@ Not in this run: `verify_round_trip_ping`, `verify_round_trip_ack`.
         assert_eq!(got.len(), 6, "{got:#?}");
     }
 
+    #[test]
+    fn a_message_without_a_property_id_is_rejected_and_one_with_an_id_accepted() {
+        let msg = |m: &str| {
+            CODE.replace(
+                "check!(x < 200, \"P-1: the thing stays bounded\");",
+                &format!("check!(x < 200, \"{m}\");\n    let _ = || fail!(\"P-1: unreachable\");"),
+            )
+        };
+        // with an id the table defines (one, or several as `INV-3/INV-16: …`), nothing to report
+        for ok in [
+            "P-1: the thing stays bounded",
+            "P-1/P-2: the thing stays bounded",
+            "SR-1: the thing stays bounded",
+        ] {
+            let got = problems(SAFETY, REPORT, &msg(ok), PER_KIND);
+            assert!(got.is_empty(), "{ok}: {got:#?}");
+        }
+        // without one, or with an id no table defines, or not at the start
+        let got = problems(SAFETY, REPORT, &msg("the thing stays bounded"), PER_KIND);
+        assert_eq!(
+            got,
+            ["control/src/verification.rs:6: `check!` message \"the thing stays bounded\" does not start with a property id of proofs/SAFETY.md (\"INV-n: …\", \"P-n: …\")"]
+        );
+        let got = problems(
+            SAFETY,
+            REPORT,
+            &msg("P-99: the thing stays bounded"),
+            PER_KIND,
+        );
+        assert_eq!(
+            got,
+            ["control/src/verification.rs:6: `check!` message names P-99, which no table of proofs/SAFETY.md defines"]
+        );
+        let got = problems(
+            SAFETY,
+            REPORT,
+            &msg("H-1: the thing stays bounded"),
+            PER_KIND,
+        );
+        assert_eq!(got.len(), 1, "a hazard is no property: {got:#?}");
+        let got = problems(SAFETY, REPORT, &msg("bounded (P-1)"), PER_KIND);
+        assert_eq!(got.len(), 1, "{got:#?}");
+        // `fail!` too, a message over several lines, and the line of the macro's name
+        let code = CODE.replace(
+            "check!(x < 200, \"P-1: the thing stays bounded\");",
+            "check!(x < 200, \"P-1: the thing stays bounded\");\n    if x > 250 {\n        fail!(\n            \"never\"\n        )\n    }",
+        );
+        let got = problems(SAFETY, REPORT, &code, PER_KIND);
+        assert_eq!(
+            got,
+            ["control/src/verification.rs:8: `fail!` message \"never\" does not start with a property id of proofs/SAFETY.md (\"INV-n: …\", \"P-n: …\")"]
+        );
+        // messages of the `#[cfg(test)]` module, comments and other literals are not read
+        let code = CODE
+            .replace(
+                "        assert_eq!(1, 1, \"a test may format {}\", 1);",
+                "        check!(true, \"a test's message\");",
+            )
+            .replace(
+                "    let x = src.u8();",
+                "    let x = src.u8(); // check!(x > 0, \"a comment\")\n    let _s = r#\"check!(x > 0, \"a literal\")\"#;\n    let _c = '\"';",
+            );
+        let got = problems(SAFETY, REPORT, &code, PER_KIND);
+        assert!(got.is_empty(), "{got:#?}");
+    }
+
+    #[test]
+    fn a_listed_message_without_an_id_is_allowed_and_a_stale_entry_reported() {
+        let code = CODE.replace(
+            "\"P-1: the thing stays bounded\"",
+            "\"the thing stays bounded\"",
+        );
+        let files = vec![("control/src/verification.rs".to_string(), code)];
+        let c = scan(&files, &BTreeSet::new());
+        let safety = SAFETY.replace(
+            "| P-2 | round trip | `cdc::verify_round_trip_<kind>` | TWIN |\n",
+            "",
+        );
+        let report = REPORT.replace(
+            "Not in this run: `verify_round_trip_ping`, `verify_round_trip_ack`.\n",
+            "",
+        );
+        let listed = [(
+            "control/src/verification.rs",
+            "the thing stays bounded",
+            "a fixture's reason",
+        )];
+        let allowed = Allowed {
+            unnamed_messages: &listed,
+            covers: &[],
+        };
+        let got = check_allowing(&safety, &report, &c, &files, allowed);
+        assert!(got.is_empty(), "{got:#?}");
+        let files = vec![("control/src/verification.rs".to_string(), CODE.to_string())];
+        let got = check_allowing(&safety, &report, &c, &files, allowed);
+        assert_eq!(
+            got,
+            ["xtask/src/trace.rs: UNNAMED_MESSAGES lists \"the thing stays bounded\" of control/src/verification.rs, which no `check!` or `fail!` there carries without an id: remove the entry"]
+        );
+    }
+
+    #[test]
+    fn unsatisfied_or_missing_covers_are_rejected_unless_listed() {
+        let run = |covers: &str, allowed: &[(&str, u32, u32, &str)]| {
+            let report = REPORT.replace("1 of 1 satisfied", covers);
+            let files = vec![
+                ("control/src/verification.rs".to_string(), CODE.to_string()),
+                (
+                    "protocol/src/cdc/verification.rs".to_string(),
+                    PER_KIND.to_string(),
+                ),
+            ];
+            let c = scan(&files, &BTreeSet::new());
+            let allowed = Allowed {
+                unnamed_messages: &[],
+                covers: allowed,
+            };
+            check_allowing(SAFETY, &report, &c, &files, allowed)
+        };
+        let why = "a fixture's reason";
+        assert_eq!(
+            run("1 of 2 satisfied", &[]),
+            ["proofs/REPORT.md: fresh-clone row `verify_thing_bounded` has 1 of 2 covers satisfied: an unsatisfied cover is a case the harness never reached (or list it with its reason in trace.rs's COVERS_NOT_ALL_SATISFIED)"]
+        );
+        assert_eq!(
+            run("–", &[]),
+            ["proofs/REPORT.md: fresh-clone row `verify_thing_bounded` has no covers: nothing shows that the harness is not vacuous (or list it with its reason in trace.rs's COVERS_NOT_ALL_SATISFIED)"]
+        );
+        // listed with its counts: allowed; with other counts, or a listing no row needs: reported
+        assert!(run("1 of 2 satisfied", &[("verify_thing_*", 1, 2, why)]).is_empty());
+        assert!(run("–", &[("verify_thing_bounded", 0, 0, why)]).is_empty());
+        assert_eq!(
+            run("0 of 2 satisfied", &[("verify_thing_*", 1, 2, why)]),
+            [
+                "proofs/REPORT.md: fresh-clone row `verify_thing_bounded` has 0 of 2 covers satisfied; COVERS_NOT_ALL_SATISFIED allows `verify_thing_*` 1 of 2",
+                "xtask/src/trace.rs: COVERS_NOT_ALL_SATISFIED allows `verify_thing_*` 1 of 2 covers, which no fresh-clone row shows: remove or correct the entry",
+            ]
+        );
+        assert_eq!(
+            run("1 of 1 satisfied", &[("verify_thing_bounded", 0, 0, why)]),
+            ["xtask/src/trace.rs: COVERS_NOT_ALL_SATISFIED allows `verify_thing_bounded` 0 of 0 covers, which no fresh-clone row shows: remove or correct the entry"]
+        );
+    }
+
+    #[test]
+    fn a_twin_exception_that_names_no_harness_is_reported() {
+        let files = vec![("control/src/verification.rs".to_string(), CODE.to_string())];
+        let code = scan(&files, &BTreeSet::new());
+        let file = "control/src/verification.rs";
+        let live = [(file, "verify_thing_*", "thing_bounded", "why")];
+        assert!(stale_twin_exceptions(&code, &live, &[]).is_empty());
+        let gone = [(file, "verify_gone", "why")];
+        assert_eq!(
+            stale_twin_exceptions(&code, &live, &gone),
+            ["xtask/src/trace.rs: the twin exception `verify_gone` of control/src/verification.rs names no harness there: remove or correct it"]
+        );
+    }
+
+    #[test]
+    fn every_listed_exception_has_its_reason() {
+        for (f, m, why) in UNNAMED_MESSAGES {
+            assert!(!why.trim().is_empty(), "{f}: {m}");
+        }
+        for (p, _, _, why) in COVERS_NOT_ALL_SATISFIED {
+            assert!(!why.trim().is_empty(), "{p}");
+        }
+    }
+
     const LADDER: &str = r#"//! Ladder fixture.
 
 /// INV-7: latching faults brake in the same step.
@@ -1675,11 +2256,11 @@ mod twins {
                       | H-6 | SR-6 | INV-7 | `faults_brake` |\n";
         let report = "## Fresh-clone tables\n\n| harness | result |\n|---|---|\n\
                       | `verify_faults_brake_2` | VERIFIED |\n| `verify_faults_brake_4` | VERIFIED |\n";
-        let got = check(safety, report, &c, &files);
+        let got = check_allowing(safety, report, &c, &files, NONE);
         assert!(got.is_empty(), "{got:#?}");
         // one axis count missing from the run: the claim is no longer VERIFIED
         let report = report.replace("| `verify_faults_brake_4` | VERIFIED |\n", "");
-        let got = check(safety, &report, &c, &files);
+        let got = check_allowing(safety, &report, &c, &files, NONE);
         expect(
             &got,
             "proofs/SAFETY.md: INV-7 (§4) says VERIFIED, REPORT.md's fresh-clone tables support TWIN",

@@ -88,19 +88,19 @@ pub fn orientation_check_is_the_definition(src: &mut impl Source) {
     let result = check_rotation(m);
     check!(
         result.is_ok() == rotation,
-        "accepted exactly the proper rotations"
+        "P-18: accepted exactly the proper rotations"
     );
     if orthogonal && det == -1 {
         check!(
             result == Err(MatrixDefect::Reflection),
-            "a reflection is named as one"
+            "P-18: a reflection is named as one"
         );
     }
     cover!(src, rotation, "a rotation accepted");
     cover!(src, orthogonal && det == -1, "a reflection refused");
 }
 
-/// Every field of an output is finite, accuracies are 0..=3, the heading in [0, 360), the
+/// P-23: Every field of an output is finite, accuracies are 0..=3, the heading in [0, 360), the
 /// quaternion of unit norm.
 pub(super) fn check_output(d: &ImuData) {
     for s in [
@@ -112,26 +112,30 @@ pub(super) fn check_output(d: &ImuData) {
     ] {
         check!(
             s.x.is_finite() && s.y.is_finite() && s.z.is_finite(),
-            "every vector finite"
+            "P-23: every vector finite"
         );
-        check!((0..=3).contains(&s.accuracy), "accuracy within 0..=3");
+        check!((0..=3).contains(&s.accuracy), "P-23: accuracy within 0..=3");
     }
     check!(
         d.compass.accuracy == 0 && d.accel_velocity.accuracy == 0,
-        "no magnetometer, no velocity: accuracy 0"
+        "P-23: no magnetometer, no velocity: accuracy 0"
     );
     let q = d.dmp_quat;
     let n = q.w * q.w + q.x * q.x + q.y * q.y + q.z * q.z;
-    check!(n.is_finite() && (n - 1.0).abs() < 1e-3, "unit quaternion");
-    check!(q.w >= 0.0, "quaternion sent with w ≥ 0");
+    check!(
+        n.is_finite() && (n - 1.0).abs() < 1e-3,
+        "P-23: unit quaternion"
+    );
+    check!(q.w >= 0.0, "P-23: quaternion sent with w ≥ 0");
     check!(
         d.heading.is_finite() && (0.0..360.0).contains(&d.heading),
-        "heading within [0, 360)"
+        "P-23: heading within [0, 360)"
     );
-    check!(d.temperature.is_finite(), "temperature finite");
+    check!(d.temperature.is_finite(), "P-23: temperature finite");
 }
 
-/// Any sample rate, orientation and raw readings, with lost periods among them.
+/// P-23: The fusion's outputs stay finite and within their ranges (`check_output`) for any sample
+/// rate, orientation and raw readings, with lost periods among them (a lost reading has accuracy 0).
 pub fn update_output_finite_and_bounded(src: &mut impl Source) {
     // Small rates reach the end of the start-up window within the few readings of a case.
     let hz = if src.bool() {
@@ -150,7 +154,7 @@ pub fn update_output_finite_and_bounded(src: &mut impl Source) {
             let d = f.sensor_lost();
             check!(
                 d.gyro.accuracy == 0 && d.accel.accuracy == 0 && d.linear_accel.accuracy == 0,
-                "a lost reading has accuracy 0"
+                "P-23: a lost reading has accuracy 0"
             );
             d
         } else {

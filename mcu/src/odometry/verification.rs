@@ -72,7 +72,7 @@ pub fn arc_factors_bounded(src: &mut impl Source) {
     let (a, b) = arc_factors(dtheta);
     check!(
         finite_within(a, ARC_A_MAX) && finite_within(b, ARC_B_MAX),
-        "arc factors are finite and within their bounds"
+        "P-19: arc factors are finite and within their bounds"
     );
     cover!(
         src,
@@ -96,11 +96,11 @@ pub fn position_step_stays_bounded(src: &mut impl Source) {
     let clamped = add_clamped(&mut s, step);
     check!(
         finite_within(s.hi, POSITION_HI_MAX) && finite_within(s.lo, POSITION_LO_MAX),
-        "position sum parts stay within their bounds"
+        "P-19: position sum parts stay within their bounds"
     );
     check!(
         s.value().abs() <= MAX_POSITION_M,
-        "position within its bound"
+        "P-19: position within its bound"
     );
     cover!(src, clamped, "position clamped");
     cover!(src, !clamped && step != 0.0, "position moved");
@@ -120,7 +120,7 @@ pub fn heading_turn_stays_bounded(src: &mut impl Source) {
     h.add(turn);
     check!(
         finite_within(h.hi, HEADING_TURNED_MAX) && finite_within(h.lo, HEADING_LO_MAX),
-        "a turned heading sum stays within the wrap's bounds"
+        "P-19: a turned heading sum stays within the wrap's bounds"
     );
     cover!(src, h.value() > PI, "turned past pi");
     cover!(src, h.value() <= -PI, "turned past minus pi");
@@ -145,7 +145,7 @@ pub fn heading_wrap_stays_bounded(src: &mut impl Source, negative: bool) {
     let wrapped = wrap_once(&mut h);
     check!(
         finite_within(h.hi, HEADING_HI_MAX) && finite_within(h.lo, HEADING_LO_MAX),
-        "heading sum parts stay within their bounds"
+        "P-19: heading sum parts stay within their bounds"
     );
     cover!(src, wrapped, "wrapped toward zero");
     cover!(src, !wrapped, "left within (−π, π]");
@@ -216,7 +216,7 @@ pub fn refused_period_changes_nothing(src: &mut impl Source) {
         state_bits(&o) == state_bits(&before)
             && o.config == before.config
             && o.baseline == before.baseline,
-        "a refused period changes nothing"
+        "P-19: a refused period changes nothing"
     );
     // The data are a function of the state, which the check above finds unchanged; the twin
     // also compares them (under Kani that would ask the solver whether two copies of the same
@@ -224,7 +224,7 @@ pub fn refused_period_changes_nothing(src: &mut impl Source) {
     if !cfg!(kani) {
         check!(
             data_bits(&d) == data_bits(&shown),
-            "a refused period reports the data as before"
+            "P-19: a refused period reports the data as before"
         );
     }
     let (now, was) = (o.counters, before.counters);
@@ -234,7 +234,7 @@ pub fn refused_period_changes_nothing(src: &mut impl Source) {
                 refused_dt: was.refused_dt,
                 ..now
             } == was,
-        "a refused period is counted"
+        "P-19: a refused period is counted"
     );
     cover!(src, dt.is_nan(), "period not a number");
     cover!(
@@ -257,7 +257,7 @@ mod model {
 
     /// [`Odometry::integrate`] where a harness must never reach it.
     pub(crate) fn integrate(_o: &mut Odometry, _counts: [i32; 4], _dt_s: f32) -> OdometryData {
-        statemachine::fail!("a refused period is never integrated")
+        statemachine::fail!("P-19: a refused period is never integrated")
     }
 }
 

@@ -360,7 +360,7 @@ pub(crate) fn check_open_total(src: &mut impl Source) {
         Err(RejectReason::Framing) => {
             check!(crc_good, "P-3: a Framing refusal only with a good CRC")
         }
-        Err(_) => fail!("open refused for a reason it does not check"),
+        Err(_) => fail!("P-3: open refused for a reason it does not check"),
     }
     cover!(src, r.is_ok(), "frame opened");
     cover!(src, r == Err(RejectReason::Crc), "crc refused");
@@ -408,7 +408,7 @@ pub(crate) fn check_open_shape(src: &mut impl Source) {
             );
         }
         Err(RejectReason::Crc | RejectReason::Framing) => {}
-        Err(_) => fail!("open refused for a reason it does not check"),
+        Err(_) => fail!("P-3: open refused for a reason it does not check"),
     }
     cover!(src, r.is_ok(), "frame opened");
     cover!(src, r == Err(RejectReason::Crc), "crc refused");
@@ -712,7 +712,7 @@ fn field_round_trip<S: Source, M: Copy + Default>(
     let total = n + usize::from(src.u8()) % (FIELD_BUF - n + 1);
     let mut r = Reader::new(&buf[..total]);
     let Ok(Some((read, v))) = r.next_field() else {
-        fail!("a written field did not read back");
+        fail!("P-6: a written field did not read back");
     };
     check!(
         read == field,
@@ -809,7 +809,7 @@ pub(crate) fn check_seal_open(src: &mut impl Source) {
     }
     seal(&mut f, len);
     let Ok(opened) = open(&f) else {
-        fail!("a sealed frame was refused");
+        fail!("P-6: a sealed frame was refused");
     };
     check!(
         opened.len() == len,

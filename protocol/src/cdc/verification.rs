@@ -197,13 +197,16 @@ pub(crate) fn check_candidate_at(src: &mut impl Source) {
     let is_candidate =
         rest.len() >= MIN_FRAME_LEN && rest[..2] == SOF && rest.len() == usize::from(rest[3]) + 6;
     match verdict {
-        Candidate::NotHere => check!(!is_candidate, "every candidate is checked"),
-        Candidate::BadCrc => check!(is_candidate, "a CRC is checked only for a candidate"),
+        Candidate::NotHere => check!(!is_candidate, "P-4: every candidate is checked"),
+        Candidate::BadCrc => check!(is_candidate, "P-4: a CRC is checked only for a candidate"),
         Candidate::Good(r) => {
-            check!(is_candidate, "a frame is delivered only from a candidate");
+            check!(
+                is_candidate,
+                "P-4: a frame is delivered only from a candidate"
+            );
             check!(
                 r != Err(Error::Framing),
-                "a candidate is never a framing error"
+                "P-4: a candidate is never a framing error"
             );
             cover!(src, r.is_ok(), "message");
         }
@@ -242,7 +245,7 @@ pub(crate) fn check_append(src: &mut impl Source) {
     let gone = if full { before.first.max(1) } else { 0 };
     check!(
         dec.len == before.len - gone + 1 && dec.first == before.first.saturating_sub(gone),
-        "append keeps the bytes held and adds one"
+        "P-4: append keeps the bytes held and adds one"
     );
     // Where the bytes go is checked here by the twin, and for every state by the exhaustive test
     // `append_keeps_the_bytes_in_order` (`append` moves and writes bytes without reading them, so
@@ -250,19 +253,19 @@ pub(crate) fn check_append(src: &mut impl Source) {
     // symbolic offset is the costly part of the formula: the order of the bytes kept took 200 s of
     // the harness's 227 s, and the byte appended most of what was left (92 s against 14 s).
     if !cfg!(kani) {
-        check!(dec.buf[dec.len - 1] == byte, "the byte goes last");
+        check!(dec.buf[dec.len - 1] == byte, "P-4: the byte goes last");
         let j = usize::from(src.u16_below(MAX_FRAME_LEN as u16));
         if j + 1 < dec.len {
             check!(
                 dec.buf[j] == before.buf[j + gone],
-                "the bytes kept stay in order"
+                "P-4: the bytes kept stay in order"
             );
         }
     }
     let counted = u32::from(full && before.first == 0);
     check!(
         dec.stats.dropped_bytes == before.stats.dropped_bytes.saturating_add(counted),
-        "a byte that leaves the buffer held is counted"
+        "P-4: a byte that leaves the buffer held is counted"
     );
     cover!(src, full && before.first > 1, "full buffer moved");
     cover!(src, !full, "byte added");
@@ -287,10 +290,10 @@ pub(crate) fn check_may_start(src: &mut impl Source) {
     let held = &bytes[..len];
     let yes = may_start(held, i);
     if yes {
-        check!(i < len, "only a position held may start a frame");
+        check!(i < len, "P-4: only a position held may start a frame");
         check!(
             len - i < MAX_FRAME_LEN,
-            "a candidate that can still end started fewer than MAX_FRAME_LEN bytes ago"
+            "P-4: a candidate that can still end started fewer than MAX_FRAME_LEN bytes ago"
         );
     }
     cover!(src, yes && len - i >= 4, "a header whose frame ends later");
@@ -338,31 +341,31 @@ pub(crate) fn check_stream_step(src: &mut impl Source) {
     let after = dec.stats;
     check!(
         dec.first <= dec.len && dec.len <= MAX_FRAME_LEN,
-        "the decoder never holds more than a frame"
+        "P-4: the decoder never holds more than a frame"
     );
     check!(
         after.frames >= before.frames && after.crc_errors >= before.crc_errors,
-        "counters never go down"
+        "P-4: counters never go down"
     );
     check!(
         after.message_errors >= before.message_errors
             && after.dropped_bytes >= before.dropped_bytes,
-        "counters never go down"
+        "P-4: counters never go down"
     );
     match r {
         Some(Ok(_)) | Some(Err(Error::Length | Error::UnknownMsg | Error::Value)) => {
             check!(
                 dec.buffered() == 0,
-                "nothing is held after a delivered frame"
+                "P-4: nothing is held after a delivered frame"
             );
             cover!(src, r.is_some_and(|r| r.is_ok()), "frame delivered");
         }
         _ => {
             check!(
                 dec.buffered() < MAX_FRAME_LEN,
-                "the next byte fits without dropping one"
+                "P-4: the next byte fits without dropping one"
             );
-            check!(r != Some(Err(Error::Framing)), "never a framing error");
+            check!(r != Some(Err(Error::Framing)), "P-4: never a framing error");
             cover!(src, r == Some(Err(Error::Crc)), "crc error");
             cover!(src, r.is_none() && dec.buffered() > 0, "bytes kept");
         }
@@ -476,17 +479,17 @@ impl Reference {
         let want = self.step(stream);
         check!(
             got == want,
-            "no frame held back: push answers with the earliest frame with a good CRC ending at this byte"
+            "P-5: no frame held back: push answers with the earliest frame with a good CRC ending at this byte"
         );
         let s = dec.stats();
         check!(
             s.crc_errors == self.crc_errors,
-            "each candidate with a bad CRC is counted once"
+            "P-5: each candidate with a bad CRC is counted once"
         );
         check!(
             s.dropped_bytes as usize + dec.buffered()
                 == self.dropped + (stream.len() - self.boundary),
-            "every byte is delivered in a frame, dropped or held"
+            "P-5: every byte is delivered in a frame, dropped or held"
         );
     }
 }
@@ -540,7 +543,7 @@ pub(crate) fn check_stream_holds_back_no_frame(src: &mut impl Source, m: &Messag
     let taken = reference.first_start.is_some_and(|s| s < n);
     check!(
         taken || last == Some(Ok(*m)),
-        "a valid frame after any garbage is delivered at its last byte"
+        "P-5: a valid frame after any garbage is delivered at its last byte"
     );
     let sof_at = |i: usize| stream[i] == 0xAA && stream[i + 1] == 0x55;
     cover!(src, (0..n).any(sof_at), "false SOF in the garbage");

@@ -109,7 +109,7 @@ pub(crate) fn check_rx_round_trip(src: &mut impl Source) {
     let mut again = [0u8; RX_LEN];
     match d {
         Ok(d) => encode_rx(&d, &mut again),
-        Err(_) => fail!("valid rx refused"),
+        Err(_) => fail!("P-6: valid rx refused"),
     }
     check!(
         b == again,
@@ -144,7 +144,7 @@ pub(crate) fn check_tx_round_trip(src: &mut impl Source) {
     let mut t2 = [0u8; TX_LEN];
     match decode_tx(&t) {
         Ok(d) => encode_tx(&d, &mut t2),
-        Err(_) => fail!("valid tx refused"),
+        Err(_) => fail!("P-6: valid tx refused"),
     }
     check!(t == t2, "P-6: the transmitted buffer decodes to itself");
     cover!(src, tx.imu.heading.is_nan(), "a NaN heading");
@@ -183,12 +183,12 @@ fn version_and_parity_of(src: &mut impl Source, buf: [u8; RX_LEN]) {
     if v != TRANSFER_VERSION {
         check!(
             r == Err(RejectReason::Version),
-            "a wrong transferVersion is refused as Version"
+            "INV-22: a wrong transferVersion is refused as Version"
         );
     } else if !parity {
         check!(
             r == Err(RejectReason::Parity),
-            "a wrong parity is refused as Parity"
+            "INV-22: a wrong parity is refused as Parity"
         );
     }
     cover!(src, v != TRANSFER_VERSION, "wrong version");

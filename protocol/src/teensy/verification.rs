@@ -366,35 +366,41 @@ pub(crate) fn check_robust_push_step(src: &mut impl Source) {
     let byte = src.u8();
     let r = dec.push(byte);
     let after = dec.stats;
-    check!(dec.len <= limit, "at most a frame's bytes are held");
+    check!(dec.len <= limit, "P-4: at most a frame's bytes are held");
     check!(
         after.frames >= before.frames && after.errors >= before.errors,
-        "counters never go down"
+        "P-4: counters never go down"
     );
     check!(
         after.dropped_bytes >= before.dropped_bytes,
-        "counters never go down"
+        "P-4: counters never go down"
     );
-    check!(r.is_none() || byte == 0, "an answer only at a 0x00");
+    check!(r.is_none() || byte == 0, "P-4: an answer only at a 0x00");
     if byte == 0 {
-        check!(dec.len == 0, "a 0x00 ends the run");
-        check!(r.is_some() == (held > 0), "every non-empty run is answered");
+        check!(dec.len == 0, "P-4: a 0x00 ends the run");
+        check!(
+            r.is_some() == (held > 0),
+            "P-4: every non-empty run is answered"
+        );
     } else {
         let dropped = usize::from(held == limit);
-        check!(dec.len == held + 1 - dropped, "the new byte is kept");
-        check!(dec.buf[dec.len - 1] == byte, "the new byte is kept last");
+        check!(dec.len == held + 1 - dropped, "P-4: the new byte is kept");
+        check!(
+            dec.buf[dec.len - 1] == byte,
+            "P-4: the new byte is kept last"
+        );
         // One byte kept before it, anywhere: the byte held before, one place further on if the
         // oldest was dropped.
         let i = usize::from(src.below(limit as u8));
         if i + 1 < dec.len {
             check!(
                 dec.buf[i] == bytes[i + dropped],
-                "the bytes kept are the last ones of the run, in order"
+                "P-4: the bytes kept are the last ones of the run, in order"
             );
         }
         check!(
             after.dropped_bytes == before.dropped_bytes.saturating_add(dropped as u32),
-            "each byte dropped is counted"
+            "P-4: each byte dropped is counted"
         );
     }
     cover!(src, byte != 0 && held == limit, "byte dropped at the limit");
@@ -419,7 +425,7 @@ pub(crate) fn check_against_reference(stream: &[u8], got: Option<Result<Msg, Rej
     match reference(stream) {
         Some(want) => check!(
             got == Some(want),
-            "no frame held back: a frame with a good CRC is delivered at its 0x00"
+            "P-5: no frame held back: a frame with a good CRC is delivered at its 0x00"
         ),
         None => {
             check!(
@@ -427,12 +433,12 @@ pub(crate) fn check_against_reference(stream: &[u8], got: Option<Result<Msg, Rej
                     got,
                     None | Some(Err(RejectReason::Framing | RejectReason::Crc))
                 ),
-                "nothing but a framing or CRC error where no frame ends"
+                "P-5: nothing but a framing or CRC error where no frame ends"
             );
             let answers = matches!(stream, [.., b, 0] if *b != 0);
             check!(
                 got.is_some() == answers,
-                "an answer exactly at each 0x00 ending a non-empty run"
+                "P-5: an answer exactly at each 0x00 ending a non-empty run"
             );
         }
     }
@@ -455,7 +461,7 @@ pub(crate) fn check_robust_holds_back_no_frame(src: &mut impl Source) {
     let mut frame = [0u8; ROBUST_BUF];
     check!(
         m.encode_robust(&mut frame) == Some(FRAME),
-        "every frame has the fixed length"
+        "P-5: every frame has the fixed length"
     );
     let mut stream = [0u8; GARBAGE + FRAME];
     let n = usize::from(src.u16_below(GARBAGE as u16 + 1));
@@ -484,7 +490,7 @@ pub(crate) fn holds_back_no_frame_in(src: &mut impl Source, stream: &[u8], n: us
     }
     check!(
         last == Some(Ok(*m)),
-        "a valid frame after any garbage is delivered at its 0x00"
+        "P-5: a valid frame after any garbage is delivered at its 0x00"
     );
     let run = stream[..n].iter().rev().take_while(|&&b| b != 0).count();
     cover!(src, run > 0, "non-zero garbage right before the frame");
