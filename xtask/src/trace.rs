@@ -113,7 +113,10 @@ pub const NO_TWIN: &[(&str, &str, &str)] = &[(
          the function built from them",
 )];
 
-/// Tests that enumerate their whole input space (a claim they back is EXHAUSTIVE).
+/// Tests that enumerate their claim's whole input space, or a part that the argument written beside
+/// the claim shows to stand for the rest (the CRC's linearity for the bit flips of sampled frames,
+/// the monotonicity of rounding for the odometry's magnitudes at their bounds): a claim they back is
+/// EXHAUSTIVE.
 pub const EXHAUSTIVE: &[&str] = &[
     "every_burst_by_byte_order",
     "every_burst_within_the_stuffed_bytes_changes_the_crc",
