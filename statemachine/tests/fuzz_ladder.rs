@@ -1,8 +1,9 @@
 //! The ladder fuzzed against the reference model of `tests/ladder_model` (written from
 //! `proofs/SAFETY.md`'s rules): the same event sequence goes to `Ladder<N>` and to the model, and
-//! after every event they must agree on the rung, the latch and its causes, the age and the
-//! threshold, the command held, the ESTOP holders, and the applied values must stay in the
-//! envelope the rules allow (see the model's checks).
+//! after every event they must agree on the rung, the latch and its causes, the link quality
+//! (LINK_DEGRADED), the age and the threshold, the command held (the model validates each frame
+//! itself), the ESTOP holders, and each axis's mode, applied value and drive, which the model
+//! recomputes from the rules and which must be equal bit for bit (see the model's checks).
 //!
 //! Under `cargo test` the target runs a bounded number of random inputs (bolero's random engine);
 //! `cargo xtask fuzz` runs it coverage-guided (libFuzzer through `cargo bolero`).
