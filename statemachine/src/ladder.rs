@@ -744,12 +744,15 @@ fn axis_tick(
     };
     // While the old mode still moves, its target is zero: the axis comes to rest before it switches.
     let switching = want.mode != m;
-    let held = if m == AxisMode::Position && want.mode == AxisMode::Position {
+    let running = matches!(mode, Mode::Normal | Mode::Reduced) && !switching;
+    // §1: a position axis takes the command's target only while its rung lets it run; in HOLD and
+    // STOP (a late link, or frames with enable 0) it keeps the target it had while its cap falls to
+    // zero, so no frame redirects an axis that is coming to rest. (`running` implies `want.mode == m`.)
+    let held = if running && m == AxisMode::Position {
         want.target
     } else {
         held
     };
-    let running = matches!(mode, Mode::Normal | Mode::Reduced) && !switching;
     let reduced = mode == Mode::Reduced;
     let speed_limit = if reduced { p.reduced_limit } else { p.v_max };
     let (target, step) = match (m, mode) {
@@ -1486,6 +1489,53 @@ mod tests {
             ),
             "HOLD keeps the target and lowers the cap"
         );
+    }
+
+    #[test]
+    fn frames_with_enable_0_do_not_redirect_a_position_axis_that_is_stopping() {
+        let cfg = Config::PI_SPI;
+        let p = *cfg.params();
+        let a = Command::<2>::uniform(crate::types::AxisCommand::position(1.5, 4.0), true, None);
+        let mut l = armed_with(cfg, a);
+        for _ in 0..2000 {
+            l.step(Event::Frame(a));
+            l.step(Event::Tick);
+        }
+        assert_eq!(l.mode(), Mode::Normal);
+        let cap = l.applied()[0];
+        assert!(
+            cap > p.stop_decel_step,
+            "the axis is moving: its cap is above one STOP step"
+        );
+        // The host disables the drive and, in the same frames, asks for another target.
+        let b = Command::<2>::uniform(crate::types::AxisCommand::position(-1.0, 4.0), false, None);
+        l.step(Event::Frame(b));
+        l.step(Event::Tick);
+        assert_eq!(l.mode(), Mode::Stop);
+        let held = Drive::Run(
+            [AxisDrive::Position {
+                target: Speed::from_num(1.5),
+                cap: cap - p.stop_decel_step,
+            }; 2],
+        );
+        assert_eq!(
+            l.output().drive,
+            held,
+            "STOP keeps the target and lowers the cap"
+        );
+        // §1: the axis comes to rest toward the target it had, whatever the disabled frames ask.
+        while l.applied()[0] > Speed::ZERO {
+            l.step(Event::Frame(b));
+            l.step(Event::Tick);
+            assert_eq!(l.mode(), Mode::Stop);
+            let Drive::Run(axes) = l.output().drive else {
+                panic!("STOP drives the axes")
+            };
+            assert!(
+                matches!(axes[0], AxisDrive::Position { target, .. } if target == Speed::from_num(1.5)),
+                "a disabled frame's target never reaches the drive"
+            );
+        }
     }
 
     #[test]

@@ -294,10 +294,13 @@ impl<const N: usize> Model<N> {
             strikes_since_tick: 0,
             degraded: false,
             clean: 0,
+            // §1: before its first position command an axis holds the travel's lower limit as its
+            // target; only a NORMAL or REDUCED tick gives it the command's, and until then its
+            // cap is zero.
             axes: [Axis {
                 mode: AxisMode::Coast,
                 value: Speed::ZERO,
-                target: Position::ZERO,
+                target: cfg.params().travel_lo,
             }; N],
         }
     }
@@ -580,20 +583,17 @@ impl<const N: usize> Model<N> {
             // step from zero), on every rung.
             ax.mode = cmd.mode;
         }
-        // Position: the target is the held command's on every rung. Reading of §1's "target held"
-        // (HOLD, STOP): "held" as in "the command held" (SR-8) and "every held position target"
-        // (INV-0), the last valid command's target; the ladder never moves it on its own (§1), and
-        // in HOLD and STOP from comm loss no frame changes it. In STOP from enable = 0 the disabled
-        // frames that keep arriving carry the host's targets, and the axis follows those under its
-        // falling cap.
-        if ax.mode == AxisMode::Position {
+        let toward_target = matches!(rung, Mode::Normal | Mode::Reduced);
+        // Position (§1 table): "target: the command's" in NORMAL and REDUCED, "target held" in HOLD
+        // and STOP: the axis keeps the target it had while its cap falls to zero, whatever targets
+        // the frames that still arrive carry (in STOP from enable = 0 the host keeps sending them).
+        if ax.mode == AxisMode::Position && toward_target {
             ax.target = cmd.target;
         }
         let (limit, duty_limit) = match rung {
             Mode::Reduced => (p.reduced_limit, p.duty_reduced),
             _ => (p.v_max, p.duty_max),
         };
-        let toward_target = matches!(rung, Mode::Normal | Mode::Reduced);
         ax.value = match ax.mode {
             AxisMode::Coast | AxisMode::Short => Speed::ZERO,
             // NORMAL and REDUCED: toward the target clamped to the rung's limit (REDUCED:
