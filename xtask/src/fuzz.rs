@@ -325,15 +325,21 @@ fn build(root: &Path, opts: &Options, package: &str, test: &str) -> Result<PathB
             out.status, opts.toolchain, opts.toolchain
         ));
     }
-    let text = String::from_utf8_lossy(&out.stdout);
+    test_executable(&String::from_utf8_lossy(&out.stdout), test)
+        .ok_or_else(|| format!("cargo named no executable for {package}'s tests/{test}.rs"))
+}
+
+/// The test binary of the integration-test file `test` that cargo's JSON messages
+/// (`--message-format json…`, one message a line) name.
+pub fn test_executable(messages: &str, test: &str) -> Option<PathBuf> {
     let name_key = format!("\"name\":\"{test}\"");
-    text.lines()
+    messages
+        .lines()
         .filter(|l| l.contains("\"reason\":\"compiler-artifact\"") && l.contains(&name_key))
         .find_map(|l| {
             let rest = &l[l.find("\"executable\":\"")? + "\"executable\":\"".len()..];
             Some(PathBuf::from(&rest[..rest.find('"')?]))
         })
-        .ok_or_else(|| format!("cargo named no executable for {package}'s tests/{test}.rs"))
 }
 
 /// Runs the instrumented binary `exe` on `target` with libFuzzer arguments `args`; returns its

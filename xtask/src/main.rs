@@ -18,6 +18,10 @@
 //! coverage-guided (libFuzzer, nightly) and prints executions, coverage and corpus per target (see
 //! `fuzz`).
 //!
+//! `fuzz-coverage [TARGET…]`: the source coverage (regions, lines) that each fuzz target's
+//! committed corpus alone reaches in the production files the target exercises, one Markdown
+//! table per target (see `fuzz_coverage`).
+//!
 //! `trace`: checks that `proofs/SAFETY.md`, `proofs/REPORT.md` and the harness code agree (see
 //! `trace`): one line per problem, non-zero exit if there is any.
 //!
@@ -28,6 +32,7 @@
 mod cargo;
 mod e2e;
 mod fuzz;
+mod fuzz_coverage;
 mod ros_e2e;
 mod rta;
 mod trace;
@@ -479,6 +484,30 @@ fn main() -> ExitCode {
                 }
             }
         }
+        ["fuzz-coverage", "--help" | "-h"] => {
+            println!("usage: {}\n\n{}", fuzz_coverage::USAGE, fuzz_coverage::HELP);
+            ExitCode::SUCCESS
+        }
+        ["fuzz-coverage", rest @ ..] => {
+            let rest: Vec<String> = rest.iter().map(|s| s.to_string()).collect();
+            let only = match fuzz_coverage::parse_args(&rest) {
+                Ok(o) => o,
+                Err(e) => {
+                    eprintln!("xtask fuzz-coverage: {e}\nusage: {}", fuzz_coverage::USAGE);
+                    return ExitCode::from(64);
+                }
+            };
+            match fuzz_coverage::run(workspace_root(), &only) {
+                Ok(report) => {
+                    print!("{report}");
+                    ExitCode::SUCCESS
+                }
+                Err(e) => {
+                    eprintln!("xtask fuzz-coverage: {e}");
+                    ExitCode::FAILURE
+                }
+            }
+        }
         ["fuzz", "--help" | "-h"] => {
             println!("usage: {}\n\n{}", fuzz::USAGE, fuzz::HELP);
             let names: Vec<&str> = fuzz::TARGETS.iter().map(|t| t.name).collect();
@@ -513,9 +542,10 @@ fn main() -> ExitCode {
         }
         _ => {
             eprintln!(
-                "usage: cargo xtask kani-table <dir of `--output-into-files` results>\n       cargo xtask kani-table --write <dir>…  (rewrites proofs/REPORT.md's generated tables)\n       cargo xtask trace\n       cargo xtask rta [--check [FILE] | --write [FILE]]\n       cargo xtask qemu-e2e <cdc|teensy>\n       {}\n       cargo xtask ros-e2e\n       {}",
+                "usage: cargo xtask kani-table <dir of `--output-into-files` results>\n       cargo xtask kani-table --write <dir>…  (rewrites proofs/REPORT.md's generated tables)\n       cargo xtask trace\n       cargo xtask rta [--check [FILE] | --write [FILE]]\n       cargo xtask qemu-e2e <cdc|teensy>\n       {}\n       cargo xtask ros-e2e\n       {}\n       {}",
                 variant::USAGE,
-                fuzz::USAGE
+                fuzz::USAGE,
+                fuzz_coverage::USAGE
             );
             ExitCode::FAILURE
         }
