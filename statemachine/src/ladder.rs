@@ -1210,6 +1210,51 @@ mod tests {
     }
 
     #[test]
+    fn is_valid_checks_each_value_of_the_last_setpoint_against_its_mode() {
+        // Seed 004 accepts every mode. The last setpoint of a running ladder is replaced on axis 0
+        // by one setpoint at a time: a value at a bound is accepted, one step beyond it is refused,
+        // and so is a passive mode's or a duty or velocity axis's non-zero value where only zero
+        // belongs.
+        let cfg = Config::PI_SPI;
+        let p = *cfg.params();
+        let c = Command::<2>::uniform(crate::types::AxisCommand::velocity(1.0), true, None);
+        let good = armed_with(cfg, c);
+        assert!(good.is_valid());
+        let bit = Speed::from_bits(1);
+        let sp = |mode, target, cap| AxisSetpoint { target, cap, mode };
+        let zero = Speed::ZERO;
+        let cases = [
+            (sp(AxisMode::Coast, zero, zero), true),
+            (sp(AxisMode::Coast, bit, zero), false),
+            (sp(AxisMode::Coast, zero, bit), false),
+            (sp(AxisMode::Short, zero, zero), true),
+            (sp(AxisMode::Short, -bit, zero), false),
+            (sp(AxisMode::Short, zero, bit), false),
+            (sp(AxisMode::Duty, p.duty_max, zero), true),
+            (sp(AxisMode::Duty, -p.duty_max, zero), true),
+            (sp(AxisMode::Duty, p.duty_max + bit, zero), false),
+            (sp(AxisMode::Duty, -p.duty_max - bit, zero), false),
+            (sp(AxisMode::Duty, zero, bit), false),
+            (sp(AxisMode::Velocity, p.v_max, zero), true),
+            (sp(AxisMode::Velocity, -p.v_max, zero), true),
+            (sp(AxisMode::Velocity, p.v_max + bit, zero), false),
+            (sp(AxisMode::Velocity, -p.v_max - bit, zero), false),
+            (sp(AxisMode::Velocity, zero, bit), false),
+            (sp(AxisMode::Position, p.travel_hi, p.v_max), true),
+            (sp(AxisMode::Position, p.travel_lo, zero), true),
+            (sp(AxisMode::Position, p.travel_hi + bit, zero), false),
+            (sp(AxisMode::Position, p.travel_lo - bit, zero), false),
+            (sp(AxisMode::Position, zero, p.v_max + bit), false),
+            (sp(AxisMode::Position, zero, -bit), false),
+        ];
+        for (axis, valid) in cases {
+            let mut l = good;
+            l.last.axes[0] = axis;
+            assert_eq!(l.is_valid(), valid, "{axis:?}");
+        }
+    }
+
+    #[test]
     fn every_latching_cause_blocks_rearm_and_warnings_do_not_latch() {
         let latching: [Event<2>; 6] = [
             Event::Condition {
