@@ -172,54 +172,34 @@ fn kani_rows(dir: &Path) -> Result<Vec<Row>, String> {
 /// are not compared), except those on the report's `Not in this run:` line; each row must be a
 /// harness of the runs. The check counts and covers of one program are the same in every run.
 fn kani_check(doc: &str, runs: &[Row]) -> Vec<String> {
-    let mut problems = Vec::new();
-    let block = match (doc.find(KANI_BEGIN), doc.find(KANI_END)) {
-        (Some(b), Some(e)) if b < e => doc.get(b..e).unwrap_or(""),
-        _ => return vec!["proofs/REPORT.md: no generated Kani tables".into()],
-    };
-    // (harness, result, checks, covers) of each row of the report's tables.
-    let mut rows: Vec<[String; 4]> = Vec::new();
-    for line in block.lines().filter(|l| l.starts_with("| `")) {
-        let cells: Vec<String> = line
-            .split('|')
-            .map(|c| c.trim().trim_matches('`').to_string())
-            .collect();
-        if let [_, h, r, c, v, ..] = cells.as_slice() {
-            rows.push([h.clone(), r.clone(), c.clone(), v.clone()]);
-        }
+    let fresh = trace::fresh_clone(doc);
+    if fresh.rows.is_empty() {
+        return vec!["proofs/REPORT.md: no fresh-clone table rows".into()];
     }
-    let not_in_run: Vec<&str> = doc
-        .lines()
-        .find_map(|l| l.strip_prefix("Not in this run:"))
-        .map(|rest| rest.split('`').skip(1).step_by(2).collect())
-        .unwrap_or_default();
+    let mut problems = Vec::new();
     for r in runs {
         let want = [
-            r.harness.clone(),
             result_cell(r).to_string(),
             r.checks.clone().unwrap_or_else(|| "–".into()),
             r.covers.clone().unwrap_or_else(|| "–".into()),
         ];
-        match rows.iter().find(|row| row[0] == r.harness) {
+        match fresh.cells.get(&r.harness) {
             Some(row) if *row == want => {}
             Some(row) => problems.push(format!(
                 "proofs/REPORT.md: `{}` reads {} / {} / {}, this run {} / {} / {} \
                  (regenerate: cargo xtask kani-table --write DIR…)",
-                r.harness, row[1], row[2], row[3], want[1], want[2], want[3]
+                r.harness, row[0], row[1], row[2], want[0], want[1], want[2]
             )),
-            None if not_in_run.contains(&r.harness.as_str()) => {}
+            None if fresh.not_run.contains(&r.harness) => {}
             None => problems.push(format!(
                 "proofs/REPORT.md: `{}` ran but has no row and is not on the `Not in this run:` line",
                 r.harness
             )),
         }
     }
-    for row in &rows {
-        if !runs.iter().any(|r| r.harness == row[0]) {
-            problems.push(format!(
-                "proofs/REPORT.md: `{}` has a row but did not run",
-                row[0]
-            ));
+    for h in &fresh.rows {
+        if !runs.iter().any(|r| &r.harness == h) {
+            problems.push(format!("proofs/REPORT.md: `{h}` has a row but did not run"));
         }
     }
     problems
@@ -579,7 +559,7 @@ mod tests {
             timed_out: false,
         };
         let doc = format!(
-            "Not in this run: `verify_new`.\n{KANI_BEGIN}\n| harness | result | checks | covers | time |\n\
+            "## Fresh-clone tables\n\nNot in this run: `verify_new`.\n{KANI_BEGIN}\n| harness | result | checks | covers | time |\n\
              |---|---|---|---|---|\n| `verify_a` | VERIFIED | 0 of 5 failed | 2 of 2 satisfied | 1.0 s |\n\
              | `verify_b` | VERIFIED | 0 of 7 failed | 2 of 2 satisfied | 3.0 s |\n{KANI_END}\n"
         );

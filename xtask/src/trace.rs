@@ -765,6 +765,9 @@ pub struct Fresh {
     /// Harness → (covers satisfied, covers reported), for the rows of tables with a `covers`
     /// column (`–`, no covers, is (0, 0)); stale rows left out.
     pub covers: BTreeMap<String, (u32, u32)>,
+    /// Harness → its row's result, checks and covers cells as written (`–` where the table has
+    /// no such column), stale rows included: what `cargo xtask kani-table --check` compares.
+    pub cells: BTreeMap<String, [String; 3]>,
 }
 
 /// A covers cell: `n of m satisfied` → (n, m); anything else (`–`) → no covers, (0, 0).
@@ -793,8 +796,10 @@ pub fn fresh_clone(report: &str) -> Fresh {
     let mut covers = BTreeMap::new();
     let mut not_run = BTreeSet::new();
     let mut stale = BTreeSet::new();
+    let mut cells_of = BTreeMap::new();
     let mut inside = false;
     let mut covers_col = None;
+    let mut checks_col = None;
     for l in report.lines() {
         if l.starts_with("## ") {
             inside = l.starts_with("## Fresh-clone tables");
@@ -809,11 +814,22 @@ pub fn fresh_clone(report: &str) -> Fresh {
                 let h = h.trim_matches('`');
                 if h.starts_with("verify_") {
                     results.insert(h.to_string(), r == "VERIFIED");
-                    if let Some(cell) = covers_col.and_then(|k| c.get(k).map(String::as_str)) {
-                        covers.insert(h.to_string(), covers_of(cell));
+                    let cell = |col: Option<usize>| col.and_then(|k| c.get(k).cloned());
+                    if let Some(cover) = cell(covers_col) {
+                        covers.insert(h.to_string(), covers_of(&cover));
                     }
+                    let dash = || "–".to_string();
+                    cells_of.insert(
+                        h.to_string(),
+                        [
+                            r.clone(),
+                            cell(checks_col).unwrap_or_else(dash),
+                            cell(covers_col).unwrap_or_else(dash),
+                        ],
+                    );
                 } else if h == "harness" {
                     covers_col = c.iter().position(|x| x == "covers");
+                    checks_col = c.iter().position(|x| x == "checks");
                 }
             }
         } else if l.starts_with("Not in this run:") {
@@ -831,6 +847,7 @@ pub fn fresh_clone(report: &str) -> Fresh {
         not_run,
         stale,
         covers,
+        cells: cells_of,
     }
 }
 
