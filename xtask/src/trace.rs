@@ -70,13 +70,13 @@ pub const TWIN_OF: &[(&str, &str, &str, &str)] = &[
         "protocol/src/cdc/verification.rs",
         "verify_len_flip_*",
         "bit_flip_in_every_sample_for_every_bit",
-        "one Kani entry per message kind for the LEN byte; the test flips every bit of a sample of each kind",
+        "one Kani entry for the LEN byte of every message kind; the test flips every bit of a sample of each kind",
     ),
     (
         "protocol/src/cdc/verification.rs",
         "verify_round_trip_*",
         "round_trip_of_every_kind",
-        "one Kani entry per message kind; the twin runs every kind",
+        "one Kani entry for every message kind, one after the other; the twin runs every kind",
     ),
     (
         "protocol/src/cdc/verification.rs",
@@ -156,14 +156,15 @@ pub const UNNAMED_MESSAGES: &[(&str, &str, &str)] = &[];
 /// table's counts must be exactly these.
 pub const COVERS_NOT_ALL_SATISFIED: &[(&str, u32, u32, &str)] = &[
     (
-        "verify_len_flip_*",
-        1,
-        4,
+        "verify_len_flip_every_kind",
+        8,
+        11,
         "`check_bit_flip_detected_in` has one cover for a flip of the LEN byte (\"LEN made longer\", \
          satisfied) and three in the branch of `Flip::OtherBytes` (\"flip in SOF\", \"flip in \
-         MSG_ID\", \"flip in CRC\"), which these entries never take: each flips the LEN byte \
-         (`Flip::LenByte`). The test `bit_flip_in_every_sample_for_every_bit` enumerates every flip \
-         of the other bytes, where those three fire",
+         MSG_ID\", \"flip in CRC\"), which this harness never takes: it flips the LEN byte \
+         (`Flip::LenByte`) of each kind, whose seven covers of its own are satisfied. The test \
+         `bit_flip_in_every_sample_for_every_bit` enumerates every flip of the other bytes, where \
+         those three fire",
     ),
     (
         "verify_may_start",

@@ -197,6 +197,17 @@ pub(crate) mod model {
         [(0, [0; REMEMBERED_LEN], 0); REMEMBERED];
     static mut ANSWERED: usize = 0;
 
+    /// Forgets every answer of [`uninterpreted_checksum`]: from here on it is a new function of
+    /// the bytes. For a harness that proves several claims one after the other, each of which must
+    /// hold for every pure function on its own (the seed 001 round trip of each message kind).
+    #[allow(unsafe_code)]
+    pub(crate) fn forget_checksums() {
+        // SAFETY: as in `uninterpreted_checksum`: one thread, no reference to the static kept.
+        unsafe {
+            *core::ptr::addr_of_mut!(ANSWERED) = 0;
+        }
+    }
+
     /// An uninterpreted function of the bytes: any value, but the same value whenever it is
     /// asked again about the same bytes. A property proven with it in place of
     /// [`super::checksum`] holds for *every* pure function of the bytes, and so for the real CRC,
