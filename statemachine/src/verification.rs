@@ -15,16 +15,6 @@ fn magnitude(s: Speed) -> Speed {
     s.saturating_abs()
 }
 
-fn valid_ladder<const N: usize>(src: &mut impl Source) -> Option<Ladder<N>> {
-    let cfg = arbitrary::config(src)?;
-    let l = arbitrary::ladder(src, cfg);
-    if l.is_valid() {
-        Some(l)
-    } else {
-        None
-    }
-}
-
 /// One step from a valid state: the state before, the event, the state after and the output.
 #[derive(Clone, Copy)]
 struct Step<const N: usize> {
@@ -35,27 +25,25 @@ struct Step<const N: usize> {
 }
 
 impl<const N: usize> Step<N> {
-    /// A valid ladder (`None` when the drawn state is not valid) stepped with the event `event`
-    /// draws.
-    fn draw<S: Source>(src: &mut S, event: impl FnOnce(&mut S) -> Event<N>) -> Option<Self> {
-        let l0 = valid_ladder::<N>(src)?;
-        let e = event(src);
-        let mut l = l0;
-        let out = l.step(e);
-        Some(Self { l0, e, l, out })
-    }
-
-    /// A one-step body: draws a step with `event` (states that are not valid assumed away) and runs
-    /// `checks` on it.
+    /// A one-step body: draws a configuration and a ladder (states that are not valid assumed
+    /// away), steps it with the event `event` draws and runs `checks` on the step. The parts are
+    /// built in place, not passed through `Option`s: under Kani each copy of a ladder is a
+    /// whole-state assignment in every cover's trace (about two fifths of a one-step harness's
+    /// trace, whose building and printing is a third of its time: `proofs/REPORT.md`).
     fn run<S: Source>(
         src: &mut S,
         event: impl FnOnce(&mut S) -> Event<N>,
         checks: impl FnOnce(&mut S, &Self),
     ) {
-        let s = Self::draw(src, event);
-        assume!(src, s.is_some());
-        let Some(s) = &s else { return };
-        checks(src, s);
+        let cfg = arbitrary::config(src);
+        assume!(src, cfg.is_some());
+        let Some(cfg) = cfg else { return };
+        let l0 = arbitrary::ladder::<N>(src, cfg);
+        assume!(src, l0.is_valid());
+        let e = event(src);
+        let mut l = l0;
+        let out = l.step(e);
+        checks(src, &Self { l0, e, l, out });
     }
 }
 
