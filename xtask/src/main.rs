@@ -54,14 +54,31 @@ struct Row {
     timed_out: bool,
 }
 
-/// Reads the summary lines of one result file (the last occurrence of each wins).
+/// Reads the summary lines of one result file (the last occurrence of each wins). The covers are
+/// counted from the file's per-property results where it has them: one per `cover!` of the
+/// source, which Kani reports more than once where rustc's optimisation copied it onto several
+/// paths (the copies have one message, one source location and one function: such a cover is
+/// satisfied if any copy is). Without per-property results, Kani's own summary line is taken.
 fn parse(harness: &str, text: &str) -> Row {
     let mut row = Row {
         harness: harness.to_string(),
         ..Row::default()
     };
-    for line in text.lines().map(str::trim) {
-        if let Some(rest) = line.strip_prefix("** ") {
+    let mut covers = std::collections::BTreeMap::<(&str, &str), bool>::new();
+    let mut lines = text.lines().map(str::trim).peekable();
+    while let Some(line) = lines.next() {
+        if line.starts_with("Check ") && line.contains(".cover.") {
+            let mut field = |key: &str| {
+                lines
+                    .next_if(|l| l.starts_with(key))
+                    .and_then(|l| l.strip_prefix(key))
+                    .map_or("", str::trim)
+            };
+            let status = field("- Status:");
+            let description = field("- Description:");
+            let location = field("- Location:");
+            *covers.entry((description, location)).or_default() |= status == "SATISFIED";
+        } else if let Some(rest) = line.strip_prefix("** ") {
             if rest.contains("cover properties satisfied") {
                 row.covers = Some(rest.replace(" cover properties satisfied", " satisfied"));
             } else if rest.contains(" failed") {
@@ -74,6 +91,10 @@ fn parse(harness: &str, text: &str) -> Row {
         } else if line.starts_with("CBMC timed out") {
             row.timed_out = true;
         }
+    }
+    if !covers.is_empty() {
+        let satisfied = covers.values().filter(|s| **s).count();
+        row.covers = Some(format!("{satisfied} of {} satisfied", covers.len()));
     }
     row
 }
@@ -634,6 +655,38 @@ mod tests {
         assert_eq!(r.seconds, Some(46.92777));
         let t = table(&[r]);
         assert!(t.contains("| `verify_x_2` | VERIFIED | 0 of 3178 failed (37 unreachable) | 3 of 3 satisfied | 46.9 s |"), "{t}");
+    }
+
+    #[test]
+    fn a_cover_reported_twice_counts_once() {
+        // Three cover results of two `cover!`s: "a" twice at one place (one copy satisfied), "b"
+        // once and never reached. Kani's own summary counts three.
+        let cover = |n: u32, status: &str, msg: &str, line: u32| {
+            format!(
+                "Check {n}: f.cover.{n}\n\t - Status: {status}\n\t - Description: \"{msg}\"\n\t - Location: src/x.rs:{line}:5 in function f\n\n"
+            )
+        };
+        let text = [
+            cover(1, "UNSATISFIABLE", "a", 10),
+            cover(2, "SATISFIED", "a", 10),
+            cover(3, "UNSATISFIABLE", "b", 11),
+            " ** 1 of 3 cover properties satisfied\n".into(),
+        ]
+        .concat();
+        assert_eq!(
+            parse("x", &text).covers.as_deref(),
+            Some("1 of 2 satisfied")
+        );
+        // The same message at another place is another cover.
+        let apart = [
+            cover(1, "SATISFIED", "a", 10),
+            cover(2, "UNSATISFIABLE", "a", 12),
+        ]
+        .concat();
+        assert_eq!(
+            parse("x", &apart).covers.as_deref(),
+            Some("1 of 2 satisfied")
+        );
     }
 
     #[test]

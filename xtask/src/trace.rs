@@ -167,39 +167,6 @@ pub const COVERS_NOT_ALL_SATISFIED: &[(&str, u32, u32, &str)] = &[
          those three fire",
     ),
     (
-        "verify_may_start",
-        2,
-        3,
-        "`check_may_start` has two covers (\"a header whose frame ends later\", \"a lone AA\"); Kani \
-         reports one of them twice, one copy satisfied and the other unsatisfiable, so both covers \
-         are satisfied (proofs/REPORT.md, the single-harness row of `cdc::verify_may_start`)",
-    ),
-    (
-        "verify_command_field_step",
-        6,
-        8,
-        "the harness has six covers (four of its own, two of `field_step`); Kani reports two of them twice (\"enable read\", \
-         \"speed read\", each at one source location), one copy satisfied and the other \
-         unsatisfiable: rustc's MIR optimisation of the inlined protocol code copies the covers \
-         onto a path where the condition is false. Every one of the six is satisfied",
-    ),
-    (
-        "verify_info_field_step",
-        4,
-        5,
-        "the harness has four covers (two of its own, two of `field_step`); Kani reports \"reset cause read\" twice (one \
-         source location), one copy satisfied and the other unsatisfiable, a copy made by rustc's \
-         MIR optimisation of the inlined protocol code. Every one of the four is satisfied",
-    ),
-    (
-        "verify_stream_delivers_frame",
-        2,
-        3,
-        "the harness has two covers; Kani reports \"command delivered\" twice (one \
-         source location), one copy satisfied and the other unsatisfiable, a copy made by rustc's \
-         MIR optimisation of the inlined protocol code. Both are satisfied",
-    ),
-    (
         "verify_stream_holds_back_no_frame_*",
         2,
         4,
