@@ -422,16 +422,6 @@ pub mod arbitrary {
         src.u16_below(n)
     }
 
-    /// Any count below a window of `window` ticks (0 for an empty window). Under Kani by a
-    /// comparison, which takes the same values as the remainder without a divider in the formula.
-    fn below_window(src: &mut impl Source, window: u16) -> u16 {
-        if cfg!(kani) {
-            src.u16_below(window)
-        } else {
-            src.u16().checked_rem(window).unwrap_or(0)
-        }
-    }
-
     /// Any drive mode.
     pub fn axis_mode(src: &mut impl Source) -> AxisMode {
         let i = usize::from(src.below(AxisMode::ALL.len() as u8));
@@ -677,8 +667,10 @@ pub mod arbitrary {
             },
             rearm_pending: src.bool(),
             degraded: src.bool(),
-            clean_ticks: below_window(src, p.window),
-            window_pos: below_window(src, p.window),
+            // `u16_below`: a remainder in the twins, a comparison under Kani (the same values
+            // without a divider in the formula).
+            clean_ticks: src_u16_below(src, p.window),
+            window_pos: src_u16_below(src, p.window),
             window_strikes: src.u16(),
             counters: Counters {
                 ticks: src.u32(),
